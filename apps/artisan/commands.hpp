@@ -1,0 +1,22 @@
+#pragma once
+// The artisan command line: each group of subcommands registers itself on the app.
+#include <functional>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+namespace artisan::cli {
+
+/// Options every subcommand shares.
+struct GlobalOptions {
+  bool json = false;   ///< machine-readable output on stdout
+  bool quiet = false;  ///< no human messages on stderr
+};
+
+/// A subcommand's action; returns the process exit code (0 ok, 1 bad input).
+using Action = std::function<int()>;
+
+/// Registers `info` and `convert`.
+void add_file_commands(CLI::App& app, const GlobalOptions& options, Action& action);
+
+}  // namespace artisan::cli

@@ -1,0 +1,17 @@
+#pragma once
+// File helpers shared by the readers and writers.
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <vector>
+
+namespace artisan::io {
+
+/// The whole file; throws artisan::FileError when it cannot be read.
+std::vector<uint8_t> read_file_bytes(const std::filesystem::path& path);
+
+/// Writes to a temporary file beside `path`, flushes, then renames over `path`: a failure
+/// leaves the destination as it was. Throws artisan::FileError.
+void write_file_atomically(const std::filesystem::path& path, std::span<const uint8_t> bytes);
+
+}  // namespace artisan::io
