@@ -3,8 +3,8 @@ function(artisan_set_warnings target)
   target_compile_options(${target} PRIVATE -Wall -Wextra -Wpedantic -Wshadow -Wnon-virtual-dtor
                                            -Wcast-align -Woverloaded-virtual -Wnull-dereference)
   # GCC 12 at -O2 reports false positives inside libstdc++ and Eigen (string concatenation,
-  # GCC bug 105329; AlignedBox and vector construction): these three are off.
-  target_compile_options(${target} PRIVATE -Wno-restrict -Wno-maybe-uninitialized -Wno-stringop-overflow)
+  # GCC bug 105329; vector construction): these two are off.
+  target_compile_options(${target} PRIVATE -Wno-restrict -Wno-stringop-overflow)
   if(ARTISAN_WERROR)
     target_compile_options(${target} PRIVATE -Werror)
   endif()

@@ -11,6 +11,7 @@ namespace artisan::cli {
 struct GlobalOptions {
   bool json = false;   ///< machine-readable output on stdout
   bool quiet = false;  ///< no human messages on stderr
+  std::string db = "artisan.db";  ///< workspace file (--db, or ARTISAN_DB)
 };
 
 /// A subcommand's action; returns the process exit code (0 ok, 1 bad input).
@@ -18,5 +19,7 @@ using Action = std::function<int()>;
 
 /// Registers `info` and `convert`.
 void add_file_commands(CLI::App& app, const GlobalOptions& options, Action& action);
+/// Registers the workspace commands: init, mkdir, ls, show, rm, mv, import, export, check.
+void add_workspace_commands(CLI::App& app, const GlobalOptions& options, Action& action);
 
 }  // namespace artisan::cli

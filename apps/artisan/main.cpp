@@ -11,8 +11,10 @@ int main(int argc, char** argv) {
   artisan::cli::GlobalOptions options;
   app.add_flag("--json", options.json, "Machine-readable JSON on stdout");
   app.add_flag("-q,--quiet", options.quiet, "No messages on stderr");
+  app.add_option("--db", options.db, "Workspace file")->envname("ARTISAN_DB")->capture_default_str();
   artisan::cli::Action action;
   artisan::cli::add_file_commands(app, options, action);
+  artisan::cli::add_workspace_commands(app, options, action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -30,7 +30,7 @@ TEST(Ply, EveryBunnyScanIsA512x400RangeImageWithItsExactVertexCount) {
     EXPECT_EQ(image.sensor.attributes.at("num_cols"), "512");
     EXPECT_NO_THROW(image.validate());
     // The bunny is about 15 cm across.
-    const auto size = image.bounds().sizes();
+    const Eigen::Vector3f size = image.bounds().sizes();
     EXPECT_GT(size.maxCoeff(), 0.08f) << name;
     EXPECT_LT(size.maxCoeff(), 0.25f) << name;
   }

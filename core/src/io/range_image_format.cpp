@@ -1,6 +1,4 @@
-// The ".ari" range-image format; the layout is documented in range_image_format.hpp.
-//
-// Payload (version 1), in order:
+// The ".ari" range-image format: a sealed blob (blob_container.hpp) whose payload (version 1), in order:
 //   i32 width, i32 height
 //   sensor: string kind, string name, f64 timestamp_s, u8 has_pose [+ 16 f64 row-major],
 //           u32 n_attributes, n x (string key, string value)
@@ -14,52 +12,28 @@
 // canonical form RangeImage::empty_of_size() makes.
 #include "artisan/core/io/range_image_format.hpp"
 
-#include <zlib.h>
-
 #include <algorithm>
 #include <cstring>
 
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/atomic_file.hpp"
+#include "artisan/core/io/blob_container.hpp"
 #include "artisan/core/io/bytes.hpp"
+#include "binary_fields.hpp"
 
 namespace artisan::io {
 
 namespace {
 
-constexpr char kMagic[8] = {'A', 'R', 'T', 'I', 'S', 'R', 'I', '\x1a'};
-constexpr size_t kHeaderSize = 8 + 4 + 4 + 8 + 8 + 4;
-constexpr int kMaxSide = 1 << 15;
-
-void put_transform(ByteWriter& w, const Transform& T) {
-  for (double v : to_row_major(T)) w.put<double>(v);
-}
-
-Transform get_transform(ByteReader& r, const char* field) {
-  std::array<double, 16> m;
-  for (auto& v : m) v = r.get<double>(field);
-  try {
-    return from_row_major(m);
-  } catch (const Error& e) {
-    r.fail(field, e.what());
-  }
-}
-
-uint32_t crc_of(std::span<const uint8_t> data) {
-  uLong crc = crc32(0L, Z_NULL, 0);
-  size_t done = 0;
-  while (done < data.size()) {  // zlib takes uInt lengths
-    const auto n = static_cast<uInt>(std::min<size_t>(data.size() - done, 1u << 30));
-    crc = crc32(crc, data.data() + done, n);
-    done += n;
-  }
-  return static_cast<uint32_t>(crc);
-}
+constexpr BlobMagic kMagic = {'A', 'R', 'T', 'I', 'S', 'R', 'I', '\x1a'};
+constexpr int kMaxSide = detail::kMaxImageSide;
+using detail::get_transform;
+using detail::put_transform;
 
 }  // namespace
 
 bool is_range_image_blob(std::span<const uint8_t> bytes) {
-  return bytes.size() >= sizeof kMagic && std::memcmp(bytes.data(), kMagic, sizeof kMagic) == 0;
+  return has_magic(bytes, kMagic);
 }
 
 std::vector<uint8_t> encode_range_image(const RangeImage& image, const RangeImageEncoding& encoding) {
@@ -89,10 +63,7 @@ std::vector<uint8_t> encode_range_image(const RangeImage& image, const RangeImag
   w.put<uint32_t>(static_cast<uint32_t>(image.images.size()));
   for (const auto& cam : image.images) {
     w.put_string(cam.name);
-    w.put<int32_t>(cam.image.width);
-    w.put<int32_t>(cam.image.height);
-    w.put<int32_t>(cam.image.channels);
-    w.put_bytes(cam.image.pixels);
+    detail::put_image(w, cam.image);
     w.put<uint8_t>(cam.camera.has_value());
     if (cam.camera) {
       w.put<int32_t>(cam.camera->width);
@@ -101,62 +72,11 @@ std::vector<uint8_t> encode_range_image(const RangeImage& image, const RangeImag
     }
     put_transform(w, cam.T_sensor_camera);
   }
-  const auto& raw = w.bytes();
-
-  std::vector<uint8_t> stored;
-  uint32_t flags = 0;
-  if (encoding.compress) {
-    uLongf packed = compressBound(raw.size());
-    stored.resize(packed);
-    if (compress2(stored.data(), &packed, raw.data(), raw.size(), 1) != Z_OK) throw Error("range image: compression failed");
-    stored.resize(packed);
-    flags |= 1;
-  }
-  const std::span<const uint8_t> body = encoding.compress ? std::span<const uint8_t>(stored) : std::span<const uint8_t>(raw);
-  ByteWriter out;
-  out.put_array(kMagic, sizeof kMagic);
-  out.put<uint32_t>(kRangeImageFormatVersion);
-  out.put<uint32_t>(flags);
-  out.put<uint64_t>(raw.size());
-  out.put<uint64_t>(body.size());
-  out.put<uint32_t>(crc_of(body));
-  out.put_bytes(body);
-  return std::move(out.bytes());
+  return seal_blob(kMagic, kRangeImageFormatVersion, w.bytes(), encoding.compress);
 }
 
 RangeImage decode_range_image(std::span<const uint8_t> bytes, const std::string& source) {
-  if (bytes.empty()) throw Error(source + ": empty range-image blob");
-  if (!is_range_image_blob(bytes)) throw Error(source + ": not an Artisan range image (bad magic)");
-  ByteReader h(bytes, source);
-  for (size_t i = 0; i < sizeof kMagic; ++i) h.get<uint8_t>("magic");
-  const auto version = h.get<uint32_t>("version");
-  if (version != kRangeImageFormatVersion)
-    h.fail("version", std::to_string(version) + " is not supported (this build reads version " + std::to_string(kRangeImageFormatVersion) + ")");
-  const auto flags = h.get<uint32_t>("flags");
-  if (flags & ~1u) h.fail("flags", "unknown flags " + std::to_string(flags));
-  const auto raw_size = h.get<uint64_t>("raw_size");
-  const auto data_size = h.get<uint64_t>("data_size");
-  const auto crc = h.get<uint32_t>("crc32");
-  if (data_size != h.remaining())
-    h.fail("data_size", "header says " + std::to_string(data_size) + " bytes of payload, " + std::to_string(h.remaining()) + " present");
-  const std::span<const uint8_t> body = bytes.subspan(kHeaderSize);
-  if (crc_of(body) != crc) throw Error(source + ": checksum mismatch (corrupt range image)");
-  std::vector<uint8_t> inflated;
-  std::span<const uint8_t> raw = body;
-  if (flags & 1) {
-    // Deflate cannot expand by more than 1032:1; a larger claim is corruption, refused before
-    // allocating.
-    if (raw_size > data_size * 1032 + 64) h.fail("raw_size", std::to_string(raw_size) + " is impossible for " + std::to_string(data_size) + " compressed bytes");
-    inflated.resize(raw_size);
-    uLongf n = raw_size;
-    if (uncompress(inflated.data(), &n, body.data(), body.size()) != Z_OK || n != raw_size)
-      throw Error(source + ": corrupt payload (decompression failed)");
-    raw = inflated;
-  } else if (raw_size != data_size) {
-    h.fail("raw_size", "uncompressed payload size " + std::to_string(raw_size) + " differs from " + std::to_string(data_size));
-  }
-  
-
+  const auto raw = open_blob(bytes, kMagic, kRangeImageFormatVersion, "range image", source);
   ByteReader r(raw, source);
   const int width = r.get<int32_t>("width");
   const int height = r.get<int32_t>("height");
@@ -186,14 +106,7 @@ RangeImage decode_range_image(std::span<const uint8_t> bytes, const std::string&
   for (uint32_t i = 0; i < n_images; ++i) {
     CameraImage cam;
     cam.name = r.get_string("image name");
-    cam.image.width = r.get<int32_t>("image width");
-    cam.image.height = r.get<int32_t>("image height");
-    cam.image.channels = r.get<int32_t>("image channels");
-    if (cam.image.width < 0 || cam.image.height < 0 || cam.image.width > kMaxSide || cam.image.height > kMaxSide ||
-        (cam.image.channels != 1 && cam.image.channels != 3 && cam.image.channels != 4))
-      r.fail("image size", std::to_string(cam.image.width) + " x " + std::to_string(cam.image.height) + " x " + std::to_string(cam.image.channels) + " is not valid");
-    cam.image.pixels.resize(static_cast<size_t>(cam.image.width) * cam.image.height * cam.image.channels);
-    r.get_array(cam.image.pixels.data(), cam.image.pixels.size(), "image pixels");
+    cam.image = detail::get_image(r);
     if (r.get<uint8_t>("has_camera")) {
       PinholeCamera c;
       c.width = r.get<int32_t>("camera width");

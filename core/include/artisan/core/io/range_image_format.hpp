@@ -1,14 +1,7 @@
 #pragma once
 // The project's own compact binary range-image format (".ari"), for storage and transport.
 //
-// Layout (all integers little endian):
-//   magic      8 bytes  "ARTISRI\x1a"
-//   version    u32      1
-//   flags      u32      bit 0: payload deflate-compressed
-//   raw_size   u64      size of the uncompressed payload
-//   data_size  u64      size of the payload as stored
-//   crc32      u32      CRC-32 of the payload as stored
-//   payload    data_size bytes
+// A sealed blob (blob_container.hpp) with magic "ARTISRI\x1a".
 // The payload holds the size, sensor info, the points/uv of valid pixels only, a validity
 // bitmask and the camera images; see range_image_format.cpp. Decoding checks every size and the
 // checksum, so a corrupt or truncated blob always throws.

@@ -1,0 +1,153 @@
+#pragma once
+// The workspace: everything a user makes, as a tree of folders like a file explorer, kept in
+// an SQL database with the parameters and inputs that made each object (provenance).
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "artisan/core/range_image.hpp"
+#include "artisan/core/triangle_mesh.hpp"
+#include "artisan/worldmodel/database.hpp"
+
+namespace artisan::worldmodel {
+
+using ObjectId = int64_t;
+
+/// Object kinds of the original system (see ARCHITECTURE.md, "Data model").
+enum class ObjectKind { kFolder, kImage, kMesh, kMultiMesh, kModel, kRecognizedModel, kGrid };
+
+std::string to_string(ObjectKind kind);
+/// Throws artisan::Error listing the kinds when `name` is none of them.
+ObjectKind object_kind_from_string(const std::string& name);
+
+struct ObjectInfo {
+  ObjectId id = 0;
+  ObjectKind kind = ObjectKind::kFolder;
+  std::string subkind;              ///< image: sensor kind; mesh: "original" or "merged"
+  std::optional<ObjectId> folder;   ///< the containing folder; none for the root
+  std::string name;
+  std::string path;                 ///< "/cell/east/bun000"; "/" for the root
+  int version = 1;                  ///< reprocessing makes version n+1 beside version n
+  std::optional<ObjectId> previous_version;
+  std::string created_at;           ///< ISO 8601, UTC
+  nlohmann::json metadata = nlohmann::json::object();
+};
+
+/// How a derived object was made: the operation, every parameter (defaults written out) and
+/// the input objects.
+struct Provenance {
+  std::string operation;
+  nlohmann::json parameters = nlohmann::json::object();
+  std::vector<ObjectId> inputs;
+};
+
+/// A large datum stored with an object.
+struct ObjectBlob {
+  std::string role;       ///< e.g. "range_image", "mesh"
+  std::string encoding;   ///< e.g. "artisan-range-image/1"
+  SqlBlob data;
+};
+
+struct NewObject {
+  ObjectKind kind = ObjectKind::kFolder;
+  std::string subkind;
+  std::string name;
+  nlohmann::json metadata = nlohmann::json::object();
+  std::vector<ObjectBlob> blobs;
+  std::optional<Provenance> provenance;
+};
+
+/// An image object: the range image as its "range_image" data, its size and sensor as metadata.
+NewObject make_image_object(const std::string& name, const RangeImage& image, const Provenance& provenance);
+/// A mesh (kind kMesh, subkind "original"/"merged") or a model (kind kModel): the mesh as its
+/// "mesh" data; vertex/face counts and resolution added to `metadata`.
+NewObject make_mesh_object(ObjectKind kind, const std::string& subkind, const std::string& name, const TriangleMesh& mesh,
+                           const Provenance& provenance, nlohmann::json metadata = nlohmann::json::object());
+
+struct MultiMeshMember {
+  int64_t member_id = 0;
+  ObjectId mesh = 0;
+  std::optional<int64_t> parent_member;  ///< none for the root member
+  Transform T_parent_member = Transform::Identity();
+  std::string method;                    ///< "spin", "icp", "manual", "root"
+  nlohmann::json quality = nlohmann::json::object();
+};
+
+struct CheckReport {
+  int schema_version = 0;
+  size_t objects = 0;
+  size_t blobs = 0;
+  std::vector<std::string> problems;  ///< empty when the workspace is sound
+};
+
+/// Path rules: absolute ("/a/b"), components of letters, digits and "._-+@" (no "." or ".."
+/// alone). Throws artisan::Error naming the path and the defect.
+void validate_path(const std::string& path);
+void validate_name(const std::string& name);
+
+class Workspace {
+ public:
+  static constexpr int kSchemaVersion = 1;
+
+  /// A new workspace file; throws artisan::Error when the file exists.
+  static Workspace create(const std::filesystem::path& path);
+  /// An existing workspace, migrated to the current schema; throws when it is missing, is not a
+  /// workspace or was made by a newer build.
+  static Workspace open(const std::filesystem::path& path);
+  /// Over any backend; creates the schema on an empty database and migrates an old one.
+  explicit Workspace(std::unique_ptr<Database> db);
+  Workspace(Workspace&&) noexcept;
+  Workspace& operator=(Workspace&&) noexcept;
+  ~Workspace();
+
+  // --- reading -------------------------------------------------------------------------------
+  ObjectId root() const;
+  int schema_version() const;
+  ObjectInfo get(ObjectId id) const;
+  /// "42" (an ID) or "/a/b" (a path; the latest version), or "/a/b@2" (version 2).
+  ObjectInfo resolve(const std::string& id_or_path) const;
+  /// The folder at `path`; throws when it is missing or not a folder.
+  ObjectInfo folder(const std::string& path) const;
+  /// Latest versions of the objects in a folder, ordered by name (folders first).
+  std::vector<ObjectInfo> children(ObjectId folder) const;
+  std::vector<ObjectInfo> versions(ObjectId id) const;  ///< every version of the same object, oldest first
+  std::optional<Provenance> provenance(ObjectId id) const;
+  std::vector<ObjectInfo> derived_from(ObjectId id) const;  ///< objects that list `id` as an input
+  std::vector<ObjectBlob> blobs(ObjectId id) const;
+  SqlBlob blob(ObjectId id, const std::string& role) const;
+  RangeImage load_image(ObjectId id) const;
+  TriangleMesh load_mesh(ObjectId id) const;   ///< a mesh or a model's mesh
+  std::vector<MultiMeshMember> members(ObjectId multimesh) const;
+
+  // --- writing: each call is one transaction; write() groups several into one ---------------
+  void write(const std::function<void()>& fn);
+  /// Creates the folder and missing parents; returns the folder (existing ones are fine).
+  ObjectId mkdir(const std::string& path);
+  ObjectId add(ObjectId folder, const NewObject& object);
+  /// A new version of `previous` (same folder and name), e.g. from reprocessing.
+  ObjectId add_version(ObjectId previous, NewObject object);
+  int64_t add_member(ObjectId multimesh, const MultiMeshMember& member);
+  /// Refuses (naming them) when other objects were derived from `id` or a folder is not empty,
+  /// unless `recursive`, which removes them too. Removes every version.
+  void remove(ObjectId id, bool recursive);
+  /// Into an existing folder (keeping the name), or to a new path whose folder exists.
+  void move(ObjectId id, const std::string& destination);
+
+  CheckReport check() const;
+  const Database& database() const { return *db_; }
+
+ private:
+  ObjectInfo row_to_info(const SqlRow& row) const;
+  std::string path_of(ObjectId id) const;
+  void migrate();
+  ObjectId insert_object(ObjectId folder, const NewObject& object, int64_t version, std::optional<ObjectId> previous);
+  std::unique_ptr<Database> db_;
+  int write_depth_ = 0;
+};
+
+}  // namespace artisan::worldmodel

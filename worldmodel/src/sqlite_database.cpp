@@ -1,0 +1,139 @@
+#include <sqlite3.h>
+
+#include <chrono>
+#include <thread>
+
+#include "artisan/core/error.hpp"
+#include "artisan/worldmodel/database.hpp"
+
+namespace artisan::worldmodel {
+
+namespace {
+
+class SqliteDatabase final : public Database {
+ public:
+  SqliteDatabase(const std::filesystem::path& path, const SqliteOptions& options) : path_(path) {
+    std::error_code ec;
+    if (!options.create && !std::filesystem::exists(path, ec))
+      throw Error("workspace " + path.string() + " does not exist (create it with: artisan --db " + path.string() + " init)");
+    const int flags = SQLITE_OPEN_READWRITE | (options.create ? SQLITE_OPEN_CREATE : 0) | SQLITE_OPEN_NOMUTEX;
+    if (sqlite3_open_v2(path.c_str(), &db_, flags, nullptr) != SQLITE_OK) {
+      const std::string why = db_ ? sqlite3_errmsg(db_) : "out of memory";
+      sqlite3_close(db_);
+      throw Error("workspace " + path.string() + ": cannot open: " + why);
+    }
+    sqlite3_busy_timeout(db_, options.busy_timeout_ms);
+    sqlite3_extended_result_codes(db_, 1);
+    try {
+      // Reading the schema fails here when the file is not an SQLite database.
+      query("PRAGMA journal_mode=WAL", {});
+      execute_script("PRAGMA foreign_keys=ON; PRAGMA synchronous=NORMAL;");
+    } catch (const Error& e) {
+      sqlite3_close(db_);
+      throw Error("workspace " + path.string() + " is not an Artisan workspace: " + e.what());
+    }
+  }
+  ~SqliteDatabase() override { sqlite3_close(db_); }
+
+  std::vector<SqlRow> query(const std::string& sql, const std::vector<SqlValue>& params) override {
+    sqlite3_stmt* stmt = nullptr;
+    check(sqlite3_prepare_v2(db_, sql.c_str(), static_cast<int>(sql.size()), &stmt, nullptr), sql);
+    struct Finalize {
+      sqlite3_stmt* s;
+      ~Finalize() { sqlite3_finalize(s); }
+    } finalize{stmt};
+    for (size_t i = 0; i < params.size(); ++i) {
+      const int k = static_cast<int>(i + 1);
+      const auto& p = params[i];
+      int rc = SQLITE_OK;
+      if (std::holds_alternative<std::nullptr_t>(p)) rc = sqlite3_bind_null(stmt, k);
+      else if (const auto* v = std::get_if<int64_t>(&p)) rc = sqlite3_bind_int64(stmt, k, *v);
+      else if (const auto* d = std::get_if<double>(&p)) rc = sqlite3_bind_double(stmt, k, *d);
+      else if (const auto* s = std::get_if<std::string>(&p)) rc = sqlite3_bind_text64(stmt, k, s->data(), s->size(), SQLITE_TRANSIENT, SQLITE_UTF8);
+      else {
+        const auto& b = std::get<SqlBlob>(p);
+        rc = sqlite3_bind_blob64(stmt, k, b.empty() ? "" : static_cast<const void*>(b.data()), b.size(), SQLITE_TRANSIENT);
+      }
+      check(rc, sql);
+    }
+    std::vector<SqlRow> rows;
+    while (true) {
+      const int rc = sqlite3_step(stmt);
+      if (rc == SQLITE_DONE) break;
+      if (rc != SQLITE_ROW) check(rc, sql);
+      SqlRow row(sqlite3_column_count(stmt));
+      for (int c = 0; c < static_cast<int>(row.size()); ++c) {
+        switch (sqlite3_column_type(stmt, c)) {
+          case SQLITE_INTEGER: row[c] = static_cast<int64_t>(sqlite3_column_int64(stmt, c)); break;
+          case SQLITE_FLOAT: row[c] = sqlite3_column_double(stmt, c); break;
+          case SQLITE_TEXT:
+            row[c] = std::string(reinterpret_cast<const char*>(sqlite3_column_text(stmt, c)), sqlite3_column_bytes(stmt, c));
+            break;
+          case SQLITE_BLOB: {
+            const auto* data = static_cast<const uint8_t*>(sqlite3_column_blob(stmt, c));
+            row[c] = SqlBlob(data, data + sqlite3_column_bytes(stmt, c));
+            break;
+          }
+          default: row[c] = nullptr;
+        }
+      }
+      rows.push_back(std::move(row));
+    }
+    return rows;
+  }
+
+  void execute_script(const std::string& sql) override {
+    char* err = nullptr;
+    if (sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &err) != SQLITE_OK) {
+      const std::string why = err ? err : sqlite3_errmsg(db_);
+      sqlite3_free(err);
+      throw Error("workspace " + path_.string() + ": " + why);
+    }
+  }
+
+  int64_t last_insert_id() override { return sqlite3_last_insert_rowid(db_); }
+  bool has_table(const std::string& name) override {
+    return !query("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", {name}).empty();
+  }
+  // BEGIN IMMEDIATE takes the write lock up front, so the busy timeout applies to it and two
+  // writers never deadlock upgrading read locks.
+  void begin_write() override { execute_script("BEGIN IMMEDIATE"); }
+  void begin_read() override { execute_script("BEGIN"); }
+  void commit() override { execute_script("COMMIT"); }
+  void rollback() override { execute_script("ROLLBACK"); }
+
+  std::vector<std::string> integrity_problems() override {
+    std::vector<std::string> problems;
+    for (const auto& row : query("PRAGMA integrity_check", {})) {
+      const auto& s = std::get<std::string>(row[0]);
+      if (s != "ok") problems.push_back("sqlite integrity: " + s);
+    }
+    for (const auto& row : query("PRAGMA foreign_key_check", {})) {
+      problems.push_back("foreign key violation in table " + std::get<std::string>(row[0]) + " row " +
+                         (std::holds_alternative<int64_t>(row[1]) ? std::to_string(std::get<int64_t>(row[1])) : "?") +
+                         " (refers to " + std::get<std::string>(row[2]) + ")");
+    }
+    return problems;
+  }
+
+  std::string description() const override { return "sqlite:" + path_.string(); }
+
+ private:
+  void check(int rc, const std::string& sql) {
+    if (rc == SQLITE_OK || rc == SQLITE_ROW || rc == SQLITE_DONE) return;
+    const std::string what = sqlite3_errmsg(db_);
+    if ((rc & 0xff) == SQLITE_CONSTRAINT) throw Error("workspace constraint violated: " + what);
+    throw Error("workspace " + path_.string() + ": " + what + " (in: " + sql.substr(0, 80) + ")");
+  }
+
+  std::filesystem::path path_;
+  sqlite3* db_ = nullptr;
+};
+
+}  // namespace
+
+std::unique_ptr<Database> open_sqlite(const std::filesystem::path& path, const SqliteOptions& options) {
+  return std::make_unique<SqliteDatabase>(path, options);
+}
+
+}  // namespace artisan::worldmodel
