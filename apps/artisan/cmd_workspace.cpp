@@ -7,6 +7,7 @@
 
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/geometry_file.hpp"
+#include "artisan/worldmodel/multimesh.hpp"
 #include "artisan/worldmodel/workspace.hpp"
 #include "commands.hpp"
 
@@ -70,6 +71,8 @@ json tree_json(const Workspace& ws, const ObjectInfo& folder, bool recursive) {
   return items;
 }
 
+}  // namespace
+
 json show_json(const Workspace& ws, const ObjectInfo& o) {
   json j = object_json(o);
   if (const auto p = ws.provenance(o.id)) {
@@ -99,13 +102,11 @@ json show_json(const Workspace& ws, const ObjectInfo& o) {
   if (o.kind == ObjectKind::kMultiMesh) {
     json members = json::array();
     const auto all = ws.members(o.id);
-    std::map<int64_t, Transform> T_root;
-    for (const auto& m : all) {  // members are stored parents first
-      const Transform T_root_member = m.parent_member ? T_root.at(*m.parent_member) * m.T_parent_member : m.T_parent_member;
-      T_root[m.member_id] = T_root_member;
+    const auto T_root = worldmodel::root_transforms(all);
+    for (const auto& m : all) {
       members.push_back({{"member", m.member_id}, {"mesh", m.mesh}, {"path", ws.get(m.mesh).path},
                          {"parent_member", m.parent_member ? json(*m.parent_member) : json(nullptr)},
-                         {"T_parent_member", to_row_major(m.T_parent_member)}, {"T_root_member", to_row_major(T_root_member)},
+                         {"T_parent_member", to_row_major(m.T_parent_member)}, {"T_root_member", to_row_major(T_root.at(m.member_id))},
                          {"method", m.method}, {"quality", m.quality}});
     }
     j["members"] = members;
@@ -114,9 +115,11 @@ json show_json(const Workspace& ws, const ObjectInfo& o) {
 }
 
 // Nested objects as "a.b: value" lines; arrays (transforms, lists) on one line.
-void print_flat(const json& j, const std::string& prefix) {
+static void print_flat(const json& j, const std::string& prefix) {
   for (const auto& [key, value] : j.items()) {
     if (value.is_object() && !value.empty()) print_flat(value, prefix + key + ".");
+    else if (value.is_array() && !value.empty() && value[0].is_object())
+      std::cout << "  " << prefix << key << ": " << value.size() << " entries (see --json)\n";
     else std::cout << "  " << prefix << key << ": " << (value.is_string() ? value.get<std::string>() : value.dump()) << "\n";
   }
 }
@@ -144,8 +147,23 @@ void print_show(const json& j) {
   if (j.contains("children")) {
     for (const auto& c : j["children"]) std::cout << "  " << c["name"].get<std::string>() << (c["kind"] == "folder" ? "/" : "") << "  (" << c["kind"].get<std::string>() << ", ID " << c["id"] << ")\n";
   }
-  if (j.contains("members")) std::cout << "members:\n" << j["members"].dump(2) << "\n";
+  if (j.contains("members")) {
+    std::cout << "members:\n";
+    for (const auto& m : j["members"]) {
+      const auto& T = m["T_root_member"];
+      std::printf("  %-3lld %-34s %-7s parent %-4s t_root [%7.4f %7.4f %7.4f] m", static_cast<long long>(m["member"].get<int64_t>()),
+                  m["path"].get<std::string>().c_str(), m["method"].get<std::string>().c_str(),
+                  m["parent_member"].is_null() ? "-" : std::to_string(m["parent_member"].get<int64_t>()).c_str(), T[3].get<double>(),
+                  T[7].get<double>(), T[11].get<double>());
+      if (m["quality"].contains("overlap"))
+        std::printf("  overlap %.2f  rmse %.2f mm", m["quality"]["overlap"].get<double>(), m["quality"]["rmse_m"].get<double>() * 1e3);
+      std::printf("\n");
+    }
+    std::fflush(stdout);
+  }
 }
+
+namespace {
 
 void say(const GlobalOptions& options, const std::string& message) {
   if (!options.quiet && !options.json) std::cerr << message << "\n";

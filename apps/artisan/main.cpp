@@ -15,6 +15,8 @@ int main(int argc, char** argv) {
   artisan::cli::Action action;
   artisan::cli::add_file_commands(app, options, action);
   artisan::cli::add_workspace_commands(app, options, action);
+  artisan::cli::add_pipeline_commands(app, options, action);
+  artisan::cli::add_sim_commands(app, options, action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

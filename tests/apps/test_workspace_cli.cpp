@@ -120,6 +120,12 @@ TEST_F(WorkspaceCli, BadInputExitsOneAndLeavesTheWorkspaceUnchanged) {
            {"show /a/nope", "no object at /a/nope"},
            {"export /a --out " + q(dir_ / "x.ply"), "only images, meshes"},
            {"export /a/bun000 --out " + q(dir_ / "x.obj"), "cannot write a range image"},
+           {"reprocess /a/bun000 --set min_angle_deg=10", "can be reprocessed"},
+           {"reprocess /a/bun000 --set novalue", "not key=value"},
+           {"mesh /a", "not an image"},
+           {"mesh /a/bun000 --min-angle 40", "40"},
+           {"mesh /a/bun000 --roi 1,2,3", "--roi"},
+           {"mesh /a/bun000 --set bogus=1", "no parameter \"bogus\""},
        }) {
     const auto r = run(args);
     EXPECT_EQ(r.exit_code, 1) << args << "\n" << r.err;

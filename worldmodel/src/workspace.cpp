@@ -467,6 +467,21 @@ int64_t Workspace::add_member(ObjectId multimesh, const MultiMeshMember& member)
   return id;
 }
 
+void Workspace::set_member_transform(int64_t member_id, const Transform& T_parent_member) {
+  write([&] {
+    if (db_->query("SELECT 1 FROM multimesh_members WHERE id = ?", {member_id}).empty())
+      throw Error("no multimesh member " + std::to_string(member_id));
+    db_->query("UPDATE multimesh_members SET T_parent_member = ? WHERE id = ?", {transform_json(T_parent_member).dump(), member_id});
+  });
+}
+
+void Workspace::set_metadata(ObjectId id, const json& metadata) {
+  write([&] {
+    get(id);
+    db_->query("UPDATE objects SET metadata = ? WHERE id = ?", {metadata.dump(), id});
+  });
+}
+
 void Workspace::remove(ObjectId id, bool recursive) {
   write([&] {
     const auto target = get(id);

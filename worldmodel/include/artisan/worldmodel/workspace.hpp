@@ -132,6 +132,8 @@ class Workspace {
   /// A new version of `previous` (same folder and name), e.g. from reprocessing.
   ObjectId add_version(ObjectId previous, NewObject object);
   int64_t add_member(ObjectId multimesh, const MultiMeshMember& member);
+  void set_member_transform(int64_t member_id, const Transform& T_parent_member);
+  void set_metadata(ObjectId id, const nlohmann::json& metadata);
   /// Refuses (naming them) when other objects were derived from `id` or a folder is not empty,
   /// unless `recursive`, which removes them too. Removes every version.
   void remove(ObjectId id, bool recursive);

@@ -1,0 +1,32 @@
+#pragma once
+// A 3-D k-d tree (nanoflann, compiled once in kdtree.cpp) for closest-point and support queries.
+#include <cstddef>
+#include <memory>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace artisan {
+
+class KdTree3 {
+ public:
+  /// Indexes a copy of `points`.
+  explicit KdTree3(std::vector<Eigen::Vector3f> points);
+  ~KdTree3();
+  KdTree3(KdTree3&&) noexcept;
+  KdTree3& operator=(KdTree3&&) noexcept;
+
+  /// Index of the nearest point and its squared distance [m^2]; the tree must not be empty.
+  std::pair<size_t, float> nearest(const Eigen::Vector3f& query) const;
+  /// Indices of every point within `radius` [m] of `query` (cleared first), unordered.
+  void within(const Eigen::Vector3f& query, float radius, std::vector<size_t>& indices) const;
+  const std::vector<Eigen::Vector3f>& points() const;
+  size_t size() const { return points().size(); }
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace artisan

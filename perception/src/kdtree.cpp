@@ -1,0 +1,51 @@
+#include "artisan/perception/kdtree.hpp"
+
+#include <nanoflann.hpp>
+
+namespace artisan {
+
+namespace {
+struct Cloud {
+  std::vector<Eigen::Vector3f> pts;
+  size_t kdtree_get_point_count() const { return pts.size(); }
+  float kdtree_get_pt(size_t i, size_t dim) const { return pts[i][static_cast<int>(dim)]; }
+  template <class Box>
+  bool kdtree_get_bbox(Box&) const { return false; }
+};
+using Tree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, Cloud>, Cloud, 3, size_t>;
+}  // namespace
+
+struct KdTree3::Impl {
+  Cloud cloud;
+  Tree tree;
+  explicit Impl(std::vector<Eigen::Vector3f> p) : cloud{std::move(p)}, tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16)) {
+    tree.buildIndex();
+  }
+};
+
+KdTree3::KdTree3(std::vector<Eigen::Vector3f> points) : impl_(std::make_unique<Impl>(std::move(points))) {}
+KdTree3::~KdTree3() = default;
+KdTree3::KdTree3(KdTree3&&) noexcept = default;
+KdTree3& KdTree3::operator=(KdTree3&&) noexcept = default;
+
+std::pair<size_t, float> KdTree3::nearest(const Eigen::Vector3f& query) const {
+  size_t index = 0;
+  float dist_sq = 0;
+  nanoflann::KNNResultSet<float, size_t> result(1);
+  result.init(&index, &dist_sq);
+  impl_->tree.findNeighbors(result, query.data(), nanoflann::SearchParams(32, 0.0f, false));
+  return {index, dist_sq};
+}
+
+void KdTree3::within(const Eigen::Vector3f& query, float radius, std::vector<size_t>& indices) const {
+  std::vector<std::pair<size_t, float>> matches;
+  nanoflann::SearchParams params(32, 0.0f, false);
+  impl_->tree.radiusSearch(query.data(), radius * radius, matches, params);
+  indices.clear();
+  indices.reserve(matches.size());
+  for (const auto& m : matches) indices.push_back(m.first);
+}
+
+const std::vector<Eigen::Vector3f>& KdTree3::points() const { return impl_->cloud.pts; }
+
+}  // namespace artisan

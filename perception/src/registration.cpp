@@ -1,0 +1,253 @@
+#include "artisan/perception/registration.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+
+#include <Eigen/Geometry>
+
+#include "artisan/core/error.hpp"
+
+namespace artisan {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+struct Correspondence {
+  size_t source;  // index into the resampled source cloud
+  size_t target;  // index into the resampled target cloud
+  float similarity;
+};
+
+// Spin images normalised so that a dot product is their correlation coefficient, and a 0/1
+// mask of occupied bins so that a dot product counts overlapping bins.
+void normalise(const SpinImageStack& stack, Eigen::MatrixXf& z, Eigen::MatrixXf& mask) {
+  const int bins = stack.width * stack.width;
+  z.resize(bins, static_cast<Eigen::Index>(stack.size()));
+  mask.resize(bins, static_cast<Eigen::Index>(stack.size()));
+  for (size_t k = 0; k < stack.size(); ++k) {
+    Eigen::Map<const Eigen::VectorXf> v(stack.image(k), bins);
+    const float mean = v.mean();
+    Eigen::VectorXf c = v.array() - mean;
+    const float norm = c.norm();
+    z.col(static_cast<Eigen::Index>(k)) = norm > 0 ? Eigen::VectorXf(c / norm) : Eigen::VectorXf::Zero(bins);
+    mask.col(static_cast<Eigen::Index>(k)) = (v.array() > 0).cast<float>();
+  }
+}
+
+// Relative disagreement of the spin-map coordinates of two correspondences (eq. 9), made
+// symmetric, and the grouping distance that discounts nearby pairs (eq. 10).
+struct Consistency {
+  float d_gc;
+  float w_gc;
+};
+Consistency consistency(const PointCloud& src, const PointCloud& tgt, const Correspondence& a, const Correspondence& b, float gamma) {
+  const Eigen::Vector2f s_ab = spin_coordinates(src.points[a.source], src.normals[a.source], src.points[b.source]);
+  const Eigen::Vector2f t_ab = spin_coordinates(tgt.points[a.target], tgt.normals[a.target], tgt.points[b.target]);
+  const Eigen::Vector2f s_ba = spin_coordinates(src.points[b.source], src.normals[b.source], src.points[a.source]);
+  const Eigen::Vector2f t_ba = spin_coordinates(tgt.points[b.target], tgt.normals[b.target], tgt.points[a.target]);
+  auto d = [](const Eigen::Vector2f& s, const Eigen::Vector2f& t) {
+    const float scale = 0.5f * (s.norm() + t.norm());
+    return scale > 0 ? (s - t).norm() / scale : 0.0f;
+  };
+  auto w = [gamma](float dgc, const Eigen::Vector2f& s, const Eigen::Vector2f& t) {
+    return dgc / (1.0f - std::exp(-0.5f * (s.norm() + t.norm()) / gamma) + 1e-9f);
+  };
+  const float d1 = d(s_ab, t_ab), d2 = d(s_ba, t_ba);
+  return {std::max(d1, d2), std::max(w(d1, s_ab, t_ab), w(d2, s_ba, t_ba))};
+}
+
+Transform transform_from(const PointCloud& src, const PointCloud& tgt, const std::vector<Correspondence>& group) {
+  Eigen::Matrix3Xd from(3, group.size()), to(3, group.size());
+  for (size_t k = 0; k < group.size(); ++k) {
+    from.col(static_cast<Eigen::Index>(k)) = src.points[group[k].source].cast<double>();
+    to.col(static_cast<Eigen::Index>(k)) = tgt.points[group[k].target].cast<double>();
+  }
+  Transform T = Transform::Identity();
+  T.matrix() = Eigen::umeyama(from, to, false);
+  return T;
+}
+
+double resolution_of(const TriangleMesh& mesh) {
+  const double r = mesh.median_edge_length();
+  if (!(r > 0)) throw Error("registration: a mesh has no faces, so no resolution");
+  return r;
+}
+
+void check_meshes(const TriangleMesh& target, const TriangleMesh& source) {
+  if (target.vertices.empty() || source.vertices.empty())
+    throw Error("registration: empty mesh (target " + std::to_string(target.vertices.size()) + ", source " +
+                std::to_string(source.vertices.size()) + " vertices)");
+}
+
+}  // namespace
+
+RegistrationResult refine_registration(const TriangleMesh& target, const TriangleMesh& source,
+                                       const Transform& T_target_source_init, const RegistrationSettings& settings) {
+  check_meshes(target, source);
+  const auto t0 = Clock::now();
+  const PointCloud tgt = oriented_points(target), src = oriented_points(source);
+  const KdTree3 tree(tgt.points);
+  const double res = std::max(resolution_of(target), resolution_of(source));
+  RegistrationResult result;
+  result.resolution_m = res;
+  // Coarse to fine: a wide capture range first, then the settings' distance.
+  IcpSettings icp = settings.icp;
+  Transform T = T_target_source_init;
+  for (double factor : {6.0 * settings.icp_distance_factor, 2.0 * settings.icp_distance_factor, settings.icp_distance_factor}) {
+    icp.max_correspondence_distance_m = factor * res;
+    icp.huber_delta_m = 0.5 * res;
+    const auto r = icp_point_to_plane(src, tgt, tree, T, icp);
+    T = r.T_target_source;
+    result.overlap_fraction = r.overlap_fraction;
+    result.rmse_m = r.rmse_m;
+  }
+  result.T_target_source = T;
+  result.seconds_icp = since(t0);
+  if (result.overlap_fraction < settings.min_overlap) {
+    result.failure = "overlap " + std::to_string(result.overlap_fraction) + " is below the minimum " + std::to_string(settings.min_overlap);
+  } else if (result.rmse_m > settings.max_rmse_factor * res) {
+    result.failure = "residual " + std::to_string(result.rmse_m * 1e3) + " mm exceeds " + std::to_string(settings.max_rmse_factor) +
+                     " x the resolution " + std::to_string(res * 1e3) + " mm";
+  } else {
+    result.success = true;
+  }
+  return result;
+}
+
+RegistrationResult register_meshes(const TriangleMesh& target, const TriangleMesh& source, const RegistrationSettings& settings) {
+  check_meshes(target, source);
+  const auto& mp = settings.match;
+  RegistrationResult result;
+  auto t0 = Clock::now();
+  const double res = mp.resolution_m > 0 ? mp.resolution_m : 3.0 * std::max(resolution_of(target), resolution_of(source));
+  result.resolution_m = res;
+  const PointCloud tgt = resample_oriented_points(oriented_points(target), res);
+  const PointCloud src = resample_oriented_points(oriented_points(source), res);
+  const KdTree3 tgt_tree(tgt.points), src_tree(src.points);
+  std::vector<size_t> scene_points;
+  const size_t step = std::max<size_t>(1, static_cast<size_t>(std::lround(1.0 / std::clamp(mp.scene_point_fraction, 1e-3, 1.0))));
+  for (size_t i = 0; i < src.points.size(); i += step) scene_points.push_back(i);
+  const auto tgt_spins = compute_spin_images(tgt, tgt_tree, {}, res, mp.spin);
+  const auto src_spins = compute_spin_images(src, src_tree, scene_points, res, mp.spin);
+  result.seconds_spin_images = since(t0);
+
+  // Similarity of every scene spin image with every target spin image (eq. 8): the correlation
+  // coefficient over the whole image (a normalised dot product, one matrix product) and the
+  // number of bins both images occupy.
+  t0 = Clock::now();
+  Eigen::MatrixXf zt, mt, zs, ms;
+  normalise(tgt_spins, zt, mt);
+  normalise(src_spins, zs, ms);
+  const Eigen::MatrixXf R = zs.transpose() * zt;
+  const Eigen::MatrixXf N = ms.transpose() * mt;
+  std::vector<Correspondence> candidates;
+  std::vector<float> row(static_cast<size_t>(R.cols()));
+  for (Eigen::Index i = 0; i < R.rows(); ++i) {
+    for (Eigen::Index j = 0; j < R.cols(); ++j) {
+      const float r = std::min(R(i, j), 0.9999f), n = N(i, j);
+      row[static_cast<size_t>(j)] = (r > 0 && n > 3) ? std::pow(std::atanh(r), 2.0f) - static_cast<float>(mp.lambda) / (n - 3) : -1e9f;
+    }
+    // Upper outliers of this scene point's similarity histogram (section 4.3).
+    std::vector<float> sorted = row;
+    const size_t q1i = sorted.size() / 4, q3i = 3 * sorted.size() / 4;
+    std::nth_element(sorted.begin(), sorted.begin() + q3i, sorted.end());
+    const float q3 = sorted[q3i];
+    std::nth_element(sorted.begin(), sorted.begin() + q1i, sorted.begin() + q3i);
+    const float q1 = sorted[q1i];
+    const float threshold = q3 + static_cast<float>(mp.outlier_spread) * (q3 - q1);
+    // At most the three best outliers per scene point.
+    std::vector<std::pair<float, size_t>> best;
+    for (size_t j = 0; j < row.size(); ++j)
+      if (row[j] > threshold) best.emplace_back(row[j], j);
+    std::partial_sort(best.begin(), best.begin() + std::min<size_t>(3, best.size()), best.end(), std::greater<>());
+    for (size_t k = 0; k < std::min<size_t>(3, best.size()); ++k)
+      candidates.push_back({src_spins.basis[static_cast<size_t>(i)], tgt_spins.basis[best[k].second], best[k].first});
+  }
+  if (candidates.empty()) {
+    result.failure = "no spin-image matches";
+    result.seconds_matching = since(t0);
+    return result;
+  }
+  const float best_similarity = std::max_element(candidates.begin(), candidates.end(), [](auto& a, auto& b) { return a.similarity < b.similarity; })->similarity;
+  std::erase_if(candidates, [&](const Correspondence& c) { return c.similarity < mp.similarity_ratio * best_similarity; });
+  std::sort(candidates.begin(), candidates.end(), [](auto& a, auto& b) { return a.similarity > b.similarity; });
+  if (candidates.size() > 1500) candidates.resize(1500);
+
+  // Geometric consistency (section 5.1): drop matches consistent with under a quarter of the others.
+  const size_t n = candidates.size();
+  const float gamma = static_cast<float>(mp.gamma_factor * res);
+  std::vector<Consistency> pair(n * n);
+#pragma omp parallel for schedule(dynamic, 16)
+  for (size_t a = 0; a < n; ++a)
+    for (size_t b = 0; b < n; ++b) pair[a * n + b] = a == b ? Consistency{0, 0} : consistency(src, tgt, candidates[a], candidates[b], gamma);
+  std::vector<size_t> kept;
+  for (size_t a = 0; a < n; ++a) {
+    size_t consistent = 0;
+    for (size_t b = 0; b < n; ++b) consistent += b != a && pair[a * n + b].d_gc < mp.geometric_consistency;
+    if (4 * consistent >= n - 1 || n < 8) kept.push_back(a);
+  }
+  result.candidate_correspondences = kept.size();
+
+  // Grouping (section 5.2): from each seed, add matches whose grouping distance to every member
+  // stays below T_gc; each group of at least min_group_size gives a transform.
+  struct Candidate {
+    Transform T;
+    size_t size;
+  };
+  std::vector<Candidate> transforms;
+  for (size_t s = 0; s < kept.size() && static_cast<int>(transforms.size()) < mp.max_groups; ++s) {
+    std::vector<size_t> group = {kept[s]};
+    for (size_t c : kept) {
+      if (c == kept[s]) continue;
+      bool ok = true;
+      for (size_t g : group)
+        if (pair[c * n + g].w_gc >= mp.geometric_consistency) { ok = false; break; }
+      if (ok) group.push_back(c);
+    }
+    if (static_cast<int>(group.size()) < mp.min_group_size) continue;
+    std::vector<Correspondence> members;
+    for (size_t g : group) members.push_back(candidates[g]);
+    transforms.push_back({transform_from(src, tgt, members), group.size()});
+  }
+  result.seconds_matching = since(t0);
+  if (transforms.empty()) {
+    result.failure = "no geometrically consistent group of " + std::to_string(mp.min_group_size) + " matches";
+    return result;
+  }
+
+  // Verification (section 5.3): a short ICP from each transform on the resampled clouds; the
+  // best overlap wins, then the residual.
+  t0 = Clock::now();
+  IcpSettings coarse;
+  coarse.max_iterations = 12;
+  coarse.max_correspondence_distance_m = 2.0 * res;
+  coarse.huber_delta_m = 0.5 * res;
+  coarse.max_source_points = 1500;
+  double best_score = -1;
+  Transform best = Transform::Identity();
+  for (const auto& c : transforms) {
+    const auto r = icp_point_to_plane(src, tgt, tgt_tree, c.T, coarse);
+    const double score = r.overlap_fraction - 0.1 * r.rmse_m / res;
+    ++result.groups_verified;
+    if (score > best_score) {
+      best_score = score;
+      best = r.T_target_source;
+      result.consistent_correspondences = c.size;
+    }
+  }
+  const double seconds_verify = since(t0);
+  auto refined = refine_registration(target, source, best, settings);
+  refined.seconds_icp += seconds_verify;
+  refined.seconds_spin_images = result.seconds_spin_images;
+  refined.seconds_matching = result.seconds_matching;
+  refined.consistent_correspondences = result.consistent_correspondences;
+  refined.candidate_correspondences = result.candidate_correspondences;
+  refined.groups_verified = result.groups_verified;
+  return refined;
+}
+
+}  // namespace artisan

@@ -1,0 +1,94 @@
+#include "artisan/perception/spin_image.hpp"
+
+#include <cmath>
+#include <string>
+#include <unordered_map>
+
+#include "artisan/core/error.hpp"
+
+namespace artisan {
+
+SpinImageStack compute_spin_images(const PointCloud& cloud, const KdTree3& tree, const std::vector<size_t>& basis,
+                                   double resolution_m, const SpinImageParams& params) {
+  if (cloud.normals.size() != cloud.points.size()) throw Error("spin images: the cloud needs one normal per point");
+  if (params.image_width < 2 || !(params.bin_size_factor > 0) || !(resolution_m > 0))
+    throw Error("spin images: image_width " + std::to_string(params.image_width) + ", bin_size_factor " +
+                std::to_string(params.bin_size_factor) + " and resolution " + std::to_string(resolution_m) + " m must be positive");
+  SpinImageStack stack;
+  stack.width = params.image_width;
+  stack.bin_size_m = params.bin_size_factor * resolution_m;
+  if (basis.empty()) {
+    stack.basis.resize(cloud.points.size());
+    for (size_t i = 0; i < stack.basis.size(); ++i) stack.basis[i] = i;
+  } else {
+    stack.basis = basis;
+  }
+  const int w = stack.width;
+  const float b = static_cast<float>(stack.bin_size_m);
+  const float half_height = 0.5f * w * b;  // beta spans [-W/2, W/2]
+  const float max_alpha = w * b;
+  const float support_radius = std::sqrt(max_alpha * max_alpha + half_height * half_height);
+  const float min_cos = static_cast<float>(std::cos(params.support_angle_deg * M_PI / 180.0));
+  stack.values.assign(stack.basis.size() * w * w, 0.0f);
+#pragma omp parallel
+  {
+    std::vector<size_t> support;
+#pragma omp for schedule(dynamic, 32)
+    for (size_t k = 0; k < stack.basis.size(); ++k) {
+      const Eigen::Vector3f& p = cloud.points[stack.basis[k]];
+      const Eigen::Vector3f& n = cloud.normals[stack.basis[k]];
+      float* image = stack.values.data() + k * w * w;
+      tree.within(p, support_radius, support);
+      for (size_t j : support) {
+        if (cloud.normals[j].dot(n) < min_cos) continue;
+        const Eigen::Vector2f ab = spin_coordinates(p, n, cloud.points[j]);
+        // Row from the top (beta = +W/2) down, column from the axis out (eq. 2), bilinear.
+        const float fi = (half_height - ab.y()) / b;
+        const float fj = ab.x() / b;
+        const int i0 = static_cast<int>(std::floor(fi)), j0 = static_cast<int>(std::floor(fj));
+        if (i0 < 0 || j0 < 0 || i0 >= w - 1 || j0 >= w - 1) continue;
+        const float di = fi - i0, dj = fj - j0;
+        image[i0 * w + j0] += (1 - di) * (1 - dj);
+        image[i0 * w + j0 + 1] += (1 - di) * dj;
+        image[(i0 + 1) * w + j0] += di * (1 - dj);
+        image[(i0 + 1) * w + j0 + 1] += di * dj;
+      }
+    }
+  }
+  return stack;
+}
+
+PointCloud resample_oriented_points(const PointCloud& cloud, double resolution_m) {
+  if (!(resolution_m > 0)) throw Error("resample: resolution " + std::to_string(resolution_m) + " m is not positive");
+  if (cloud.normals.size() != cloud.points.size()) throw Error("resample: the cloud needs one normal per point");
+  struct Cell {
+    Eigen::Vector3d sum_p = Eigen::Vector3d::Zero();
+    Eigen::Vector3d sum_n = Eigen::Vector3d::Zero();
+    int count = 0;
+  };
+  std::unordered_map<uint64_t, Cell> cells;
+  std::vector<uint64_t> order;
+  const double inv = 1.0 / resolution_m;
+  for (size_t i = 0; i < cloud.points.size(); ++i) {
+    const Eigen::Vector3d p = cloud.points[i].cast<double>();
+    const auto key = (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.x() * inv)) & 0x1fffff) << 42) |
+                     (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.y() * inv)) & 0x1fffff) << 21) |
+                     (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.z() * inv)) & 0x1fffff));
+    auto [it, inserted] = cells.try_emplace(key);
+    if (inserted) order.push_back(key);
+    it->second.sum_p += p;
+    it->second.sum_n += cloud.normals[i].cast<double>();
+    ++it->second.count;
+  }
+  PointCloud out;
+  for (uint64_t key : order) {  // first-seen order: deterministic
+    const Cell& c = cells[key];
+    const double len = c.sum_n.norm();
+    if (len < 1e-9) continue;  // normals cancel: a sheet seen from both sides
+    out.points.push_back((c.sum_p / c.count).cast<float>());
+    out.normals.push_back((c.sum_n / len).cast<float>());
+  }
+  return out;
+}
+
+}  // namespace artisan

@@ -1,0 +1,72 @@
+#pragma once
+// One simulated acquisition: the range image in the internal format (exactly what a sensor
+// driver produces) plus the ground truth needed to score every later stage.
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "artisan/core/camera.hpp"
+#include "artisan/core/range_image.hpp"
+#include "artisan/sim/workcell.hpp"
+
+namespace artisan::sim {
+
+struct EnvironmentReading {
+  double time_s = 0.0;                      ///< simulated clock [s since the epoch]
+  Transform T_world_rig = Transform::Identity();  ///< where the rig was
+  double dose_rate_uSv_per_h = 0.0;         ///< gamma dose rate [µSv/h]
+  double temperature_C = 0.0;               ///< [°C]
+  double humidity_percent = 0.0;            ///< relative humidity [%]
+};
+
+struct ObjectTruth {
+  int instance_id = 0;
+  std::string name;
+  BodyRole role = BodyRole::structure;
+  Transform T_world_object = Transform::Identity();
+  int visible_pixels = 0;        ///< pixels of this instance in the acquisition's instance image
+  int unoccluded_pixels = 0;     ///< pixels it covers when rendered alone from the same view
+  double visible_fraction = 0.0; ///< visible / unoccluded (0 when out of view)
+};
+
+struct GroundTruth {
+  std::string sensor_name;
+  std::string sensor_kind;
+  uint64_t seed = 0;
+  double time_s = 0.0;                            ///< acquisition time [s since the epoch]
+  Transform T_world_sensor = Transform::Identity();
+  PinholeCamera camera;                           ///< the range image's pixel grid (sensor frame = its camera frame)
+  std::vector<uint16_t> instance_ids;             ///< per range pixel; 0 = nothing
+  std::vector<float> depth_m;                     ///< noise-free z per range pixel [m]; 0 = nothing
+  std::vector<ObjectTruth> objects;               ///< every body, in workcell order
+  std::map<std::string, double> joint_values;     ///< e.g. pan/tilt [rad], when the sensor moved
+  std::optional<EnvironmentReading> environment;  ///< readings taken with the acquisition
+};
+
+struct Acquisition {
+  RangeImage range;   ///< the internal format; sensor info carries kind, name, time and pose
+  GroundTruth truth;
+};
+
+/// Writes DIR/range.ari, range.png (depth, 16-bit, 0.1 mm units, 0 = no data), one PNG per camera
+/// image (<name>.png), and the ground truth: truth.json (poses, visible fractions, camera,
+/// environment), instances.png (16-bit ids), depth_truth.png (16-bit, 0.1 mm) and truth.ari
+/// (the noise-free range image, exact floats). Creates DIR. Throws artisan::FileError.
+void write_acquisition(const Acquisition& acquisition, const std::filesystem::path& dir);
+
+/// PNG writers (8-bit grey/RGB/RGBA, or 16-bit grey). Written atomically.
+void write_png(const ColorImage& image, const std::filesystem::path& path);
+void write_png16(int width, int height, const std::vector<uint16_t>& pixels, const std::filesystem::path& path);
+/// Reads a 16-bit grey PNG (e.g. instances.png). Throws artisan::FileError.
+std::vector<uint16_t> read_png16(const std::filesystem::path& path, int& width, int& height);
+
+/// Per-instance visible fractions: renders each body alone (instance pass only) from the view.
+class Renderer;
+std::vector<ObjectTruth> object_truth(Renderer& renderer, const Workcell& cell, const PinholeCamera& camera,
+                                      const Transform& T_world_camera, const std::vector<uint16_t>& instance_ids,
+                                      double near_m, double far_m);
+
+}  // namespace artisan::sim

@@ -1,0 +1,3 @@
+#include <gtest/gtest.h>
+#include "artisan/perception/meshing.hpp"
+TEST(Meshing, Placeholder) {}
