@@ -11,6 +11,7 @@
 #include "artisan/sim/acquisition.hpp"
 #include "artisan/sim/shapes.hpp"
 #include "artisan/sim/simulator.hpp"
+#include "artisan/worldmodel/workspace.hpp"
 #include "commands.hpp"
 
 namespace artisan::cli {
@@ -31,6 +32,8 @@ struct SimArgs {
   int width = 640, height = 480;
   double fov_deg = 60.0;
   std::vector<std::string> package_paths;
+  std::string folder = "/";
+  std::string name;
 };
 
 std::vector<std::filesystem::path> paths(const std::vector<std::string>& v) { return {v.begin(), v.end()}; }
@@ -57,6 +60,8 @@ void add_sim_commands(CLI::App& app, const GlobalOptions& options, Action& actio
   scan->add_option("--seed", a.seed, "Noise seed")->capture_default_str();
   scan->add_option("--out", a.out, "Output folder")->required();
   scan->add_option("--package-path", a.package_paths, "Folders searched for package:// URIs");
+  scan->add_option("--folder", a.folder, "With --db: the workspace folder the acquisition is imported into (must exist)")->capture_default_str();
+  scan->add_option("--name", a.name, "With --db: the image's name (default: the --out folder's name)");
   scan->callback([&options, &action] {
     action = [&options] {
       sim::LoadOptions lo;
@@ -68,8 +73,26 @@ void add_sim_commands(CLI::App& app, const GlobalOptions& options, Action& actio
       req.pan_rad = a.pan;
       req.tilt_rad = a.tilt;
       req.seed = a.seed;
+      // With a workspace, check the destination before the (slow) scan.
+      std::optional<worldmodel::Workspace> ws;
+      std::string name = a.name.empty() ? std::filesystem::path(a.out).lexically_normal().filename().string() : a.name;
+      if (name.empty()) name = std::filesystem::path(a.out).lexically_normal().parent_path().filename().string();
+      if (options.db_given) {
+        ws.emplace(worldmodel::Workspace::open(options.db));
+        ws->folder(a.folder);
+        worldmodel::validate_name(name);
+      }
       const auto acq = simulator.scan(req);
       sim::write_acquisition(acq, a.out);
+      std::optional<worldmodel::ObjectId> image_id;
+      if (ws) {
+        json params = {{"workcell", std::filesystem::absolute(a.workcell).lexically_normal().string()}, {"sensor", a.sensor},
+                       {"seed", a.seed}, {"out", std::filesystem::absolute(a.out).lexically_normal().string()}};
+        if (!a.pose.empty()) params["pose"] = pose_json(*req.T_world_sensor);
+        if (a.pan) params["pan_rad"] = *a.pan;
+        if (a.tilt) params["tilt_rad"] = *a.tilt;
+        image_id = ws->add(ws->folder(a.folder).id, worldmodel::make_image_object(name, acq.range, {"sim-scan", params, {}}));
+      }
       const auto& s = simulator.settle_result();
       if (options.json) {
         std::cout << json{{"out", a.out},
@@ -80,12 +103,14 @@ void add_sim_commands(CLI::App& app, const GlobalOptions& options, Action& actio
                           {"valid_pixels", acq.range.valid_count()},
                           {"time_s", acq.truth.time_s},
                           {"T_world_sensor", pose_json(acq.truth.T_world_sensor)},
-                          {"settled", {{"dropped", s.dropped}, {"at_rest", s.at_rest}, {"simulated_time_s", s.simulated_time_s}}}}
+                          {"settled", {{"dropped", s.dropped}, {"at_rest", s.at_rest}, {"simulated_time_s", s.simulated_time_s}}},
+                          {"image", image_id ? json{{"id", *image_id}, {"path", ws->get(*image_id).path}} : json(nullptr)}}
                          .dump(2)
                   << "\n";
       } else if (!options.quiet) {
         std::cerr << "wrote " << a.out << ": " << acq.range.sensor.kind << " " << acq.range.width << " x " << acq.range.height
                   << ", " << acq.range.valid_count() << " valid pixels, ground truth in truth.json\n";
+        if (image_id) std::cerr << "imported as " << ws->get(*image_id).path << " (ID " << *image_id << ")\n";
         if (!s.at_rest) std::cerr << "warning: " << s.still_moving.size() << " dropped object(s) had not come to rest\n";
       }
       return 0;

@@ -15,6 +15,7 @@ struct GlobalOptions {
   bool json = false;   ///< machine-readable output on stdout
   bool quiet = false;  ///< no human messages on stderr
   std::string db = "artisan.db";  ///< workspace file (--db, or ARTISAN_DB)
+  bool db_given = false;           ///< --db or ARTISAN_DB was given (not the default)
 };
 
 /// A subcommand's action; returns the process exit code (0 ok, 1 bad input).

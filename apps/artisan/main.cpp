@@ -1,4 +1,5 @@
 // artisan: the command line. Exit codes: 0 success, 1 bad input, 2 usage error.
+#include <cstdlib>
 #include <iostream>
 
 #include "artisan/core/error.hpp"
@@ -11,7 +12,7 @@ int main(int argc, char** argv) {
   artisan::cli::GlobalOptions options;
   app.add_flag("--json", options.json, "Machine-readable JSON on stdout");
   app.add_flag("-q,--quiet", options.quiet, "No messages on stderr");
-  app.add_option("--db", options.db, "Workspace file")->envname("ARTISAN_DB")->capture_default_str();
+  auto* db_option = app.add_option("--db", options.db, "Workspace file")->envname("ARTISAN_DB")->capture_default_str();
   artisan::cli::Action action;
   artisan::cli::add_file_commands(app, options, action);
   artisan::cli::add_workspace_commands(app, options, action);
@@ -29,6 +30,7 @@ int main(int argc, char** argv) {
     app.exit(e);
     return 2;
   }
+  options.db_given = db_option->count() > 0 || std::getenv("ARTISAN_DB") != nullptr;
   try {
     return action ? action() : 2;
   } catch (const artisan::Error& e) {

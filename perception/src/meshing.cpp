@@ -2,12 +2,13 @@
 //
 // 1. Domain. Pixel centres sit at integer image coordinates. Each unit cell between four pixel
 //    centres contributes a piece of the valid region: the whole square when its four pixels are
-//    valid and its four sides are no depth jumps, else one triangle of three valid pixels whose
-//    three sides (two cell sides and a diagonal) are no jumps, else nothing. The domain is the
-//    union of the pieces; its boundary (cell sides used by one piece only, and the diagonals of
-//    triangle pieces) runs around holes, along every depth jump and along the image (ROI) border.
-//    Input angles are multiples of 45 degrees, so the refinement below never meets an input angle
-//    under 45 degrees.
+//    valid and its four sides are no depth jumps; else, only where it covers a pixel that no
+//    square covers, one triangle of three valid pixels whose three sides (two cell sides and a
+//    diagonal) are no jumps and which faces the sensor within half_cell_max_inclination_deg;
+//    else nothing. The domain is the union of the pieces; its boundary (cell sides used by one
+//    piece only, and the diagonals of triangle pieces) runs around holes, along every depth jump
+//    and along the image (ROI) border. Input angles are multiples of 45 degrees, so the
+//    refinement below never meets an input angle under 45 degrees.
 // 2. Thinning. An adaptive quadtree (Von Herzen & Barr 1987; Sequeira et al. 1999 for range
 //    images) keeps a block of pixels as one coarse cell, represented by its four corner pixels,
 //    when every cell in it is a full square and every point in it lies within
@@ -21,11 +22,13 @@
 //    its centroid against the pieces (exact, since every boundary segment is a constraint).
 // 4. Refinement. CGAL Delaunay_mesher_2 (Ruppert 1995, Shewchuk 2002) splits encroached
 //    constraints and inserts circumcentres until every in-domain face has its smallest image-plane
-//    angle at least min_angle_deg and its longest 3-D edge at most max_edge_length_m (unless it
-//    spans one pixel or less).
+//    angle at least min_angle_deg and, while it spans more than 1.5 pixels, its longest 3-D edge
+//    at most max_edge_length_m and its smallest 3-D angle at least min_angle_3d_deg.
 // 5. Depth. Every vertex gets its 3-D point and uv from the piece that contains it: bilinear in a
 //    square piece, barycentric in a triangle piece, on the measured points only. Pixel vertices
 //    therefore keep their measured points exactly.
+// 6. Shape in 3-D. Edge flips by the 3-D max-min angle criterion that keep the image-plane bound
+//    (flip_for_3d_shape), then faces are oriented toward the sensor and vertex normals computed.
 #include "artisan/perception/meshing.hpp"
 
 #include <algorithm>
@@ -95,6 +98,7 @@ class RangeSurface {
         cw_(std::max(w_ - 1, 0)),
         ch_(std::max(h_ - 1, 0)),
         k_(params.depth_jump_ratio),
+        half_cell_tan_(std::tan(params.half_cell_max_inclination_deg * kPi / 180.0)),
         parallel_(parallel_rays),
         ray_direction_(ray_direction) {
     valid_.assign(image.pixel_count(), 0);
@@ -208,14 +212,14 @@ class RangeSurface {
     return p;
   }
 
-  // Least-squares plane test of the (s+1)^2 pixels of block (bx, by, s); all must be valid.
-  bool planar(int bx, int by, int s, double tolerance) const {
-    const int n = (s + 1) * (s + 1);
+  // Least-squares plane test of the (sx+1) x (sy+1) pixels of a block at (bx, by); all valid.
+  bool planar(int bx, int by, int sx, int sy, double tolerance) const {
+    const int n = (sx + 1) * (sy + 1);
     const Eigen::Vector3d origin = point(image_.index(bx, by)).cast<double>();
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     Eigen::Matrix3d sum_sq = Eigen::Matrix3d::Zero();
-    for (int y = by; y <= by + s; ++y) {
-      for (int x = bx; x <= bx + s; ++x) {
+    for (int y = by; y <= by + sy; ++y) {
+      for (int x = bx; x <= bx + sx; ++x) {
         const Eigen::Vector3d p = point(image_.index(x, y)).cast<double>() - origin;
         sum += p;
         sum_sq += p * p.transpose();
@@ -227,13 +231,12 @@ class RangeSurface {
     eig.computeDirect(cov);
     const Eigen::Vector3d normal = eig.eigenvectors().col(0);  // smallest eigenvalue first
     // Sample spacing: the lateral length of the block's sides per pixel, the smaller of the two.
-    const Eigen::Vector3d p00 = point(image_.index(bx, by)).cast<double>();
-    const double spacing = std::min(lateral(p00, point(image_.index(bx + s, by)).cast<double>()),
-                                    lateral(p00, point(image_.index(bx, by + s)).cast<double>())) / s;
+    const double spacing = std::min(lateral(origin, point(image_.index(bx + sx, by)).cast<double>()) / sx,
+                                    lateral(origin, point(image_.index(bx, by + sy)).cast<double>()) / sy);
     const double limit = tolerance * spacing;
     const Eigen::Vector3d centre = origin + mean;
-    for (int y = by; y <= by + s; ++y)
-      for (int x = bx; x <= bx + s; ++x)
+    for (int y = by; y <= by + sy; ++y)
+      for (int x = bx; x <= bx + sx; ++x)
         if (std::abs(normal.dot(point(image_.index(x, y)).cast<double>() - centre)) > limit) return false;
     return true;
   }
@@ -248,27 +251,23 @@ class RangeSurface {
     }
   }
 
-  // The triangle piece of a cell that is not a full square: three valid corners whose three
-  // sides (two cell sides, one diagonal) are no depth jumps, one of them covered by no piece yet.
-  // Triangles are used sparingly: Delaunay_mesher_2 counts a diagonal as encroached by the
-  // triangle's own right-angle corner (it lies on the diametral circle) and splits it, and the
-  // sub-pixel vertices this makes turn into slivers on steep surfaces.
-  bool faces_sensor(size_t a, size_t b, size_t c) const {
-    const Eigen::Vector3d pa = point(a).cast<double>(), pb = point(b).cast<double>(), pc = point(c).cast<double>();
-    const Eigen::Vector3d n = (pb - pa).cross(pc - pa);
-    const Eigen::Vector3d v = ray((pa + pb + pc) / 3);
-    return n.cross(v).norm() <= k_ * std::abs(n.dot(v));
-  }
+  // The triangle piece of a cell that is not a full square (see MeshingParams::
+  // half_cell_max_inclination_deg): three valid corners whose three sides (two cell sides, one
+  // diagonal) are no depth jumps, one of them covered by no piece yet, facing the sensor within
+  // the limit.
   uint8_t triangle_piece(int x, int y, std::vector<uint8_t>& covered) const {
     for (int k = 0; k < 4; ++k) {
       const int a = (k + 1) % 4, b = (k + 2) % 4, c = (k + 3) % 4;
       if (!side_ok(x, y, a) || !side_ok(x, y, b)) continue;  // sides a-b and b-c
       const size_t pa = corner_pixel(x, y, a), pb = corner_pixel(x, y, b), pc = corner_pixel(x, y, c);
-      if (covered[pa] && covered[pb] && covered[pc]) continue;
-      if (valid_[pc] && valid_[pa] && !is_jump(pc, pa) && (!getenv("STEEP") || faces_sensor(pa, pb, pc))) {
-        covered[pa] = covered[pb] = covered[pc] = 1;
-        return static_cast<uint8_t>(kTri + k);
-      }
+      if ((covered[pa] && covered[pb] && covered[pc]) || !valid_[pc] || !valid_[pa] || is_jump(pc, pa)) continue;
+      // Facing the sensor within the inclination limit: |n x v| <= tan(limit) |n . v|.
+      const Eigen::Vector3d qa = point(pa).cast<double>(), qb = point(pb).cast<double>(), qc = point(pc).cast<double>();
+      const Eigen::Vector3d n = (qb - qa).cross(qc - qa);
+      const Eigen::Vector3d v = ray((qa + qb + qc) / 3);
+      if (n.cross(v).norm() > half_cell_tan_ * std::abs(n.dot(v))) continue;
+      covered[pa] = covered[pb] = covered[pc] = 1;
+      return static_cast<uint8_t>(kTri + k);
     }
     return kNone;
   }
@@ -312,7 +311,7 @@ class RangeSurface {
 
   const RangeImage& image_;
   int w_, h_, cw_, ch_;
-  double k_;
+  double k_, half_cell_tan_;
   bool parallel_;
   Eigen::Vector3d ray_direction_;
   std::vector<uint8_t> valid_, h_ok_, v_ok_, piece_;
@@ -408,6 +407,9 @@ void check_params(const RangeImage& image, const MeshingParams& params) {
   if (!(params.min_angle_deg > 0) || params.min_angle_deg > kMaxMinAngleDeg)
     throw Error("mesh_range_image: min_angle_deg " + num(params.min_angle_deg) + " is outside (0, " +
                 num(kMaxMinAngleDeg) + "]; larger bounds are not guaranteed to terminate");
+  if (!(params.half_cell_max_inclination_deg >= 0) || params.half_cell_max_inclination_deg >= 90)
+    throw Error("mesh_range_image: half_cell_max_inclination_deg " + num(params.half_cell_max_inclination_deg) +
+                " is outside [0, 90)");
   if (!(params.min_angle_3d_deg >= 0) || params.min_angle_3d_deg >= 60)
     throw Error("mesh_range_image: min_angle_3d_deg " + num(params.min_angle_3d_deg) + " is outside [0, 60)");
   if (!(params.max_edge_length_m > 0))
@@ -521,67 +523,78 @@ std::vector<uint8_t> thin(const RangeSurface& surface, double tolerance) {
   for (int y = 0; y < ch; ++y)
     for (int x = 0; x < cw; ++x)
       full[at(x + 1, y + 1)] = full[at(x, y + 1)] + full[at(x + 1, y)] - full[at(x, y)] + (surface.piece(x, y) == kFull);
-  auto all_full = [&](int bx, int by, int s) {
-    if (bx + s > cw || by + s > ch) return false;
-    return full[at(bx + s, by + s)] - full[at(bx, by + s)] - full[at(bx + s, by)] + full[at(bx, by)] == s * s;
+  // A block is aligned to a multiple of its size s; at the right and bottom image borders it is
+  // clipped to the cells there are, and accepted only if at least half of it remains.
+  struct Block {
+    int x, y, s;
+    int sx(int cells_x) const { return std::min(s, cells_x - x); }
+    int sy(int cells_y) const { return std::min(s, cells_y - y); }
+  };
+  auto all_full = [&](const Block& b) {
+    const int x1 = b.x + b.sx(cw), y1 = b.y + b.sy(ch);
+    return full[at(x1, y1)] - full[at(b.x, y1)] - full[at(x1, b.y)] + full[at(b.x, b.y)] == b.sx(cw) * b.sy(ch);
+  };
+  auto children = [](const Block& b, std::vector<Block>& out) {
+    const int h = b.s / 2;
+    for (const auto& [dx, dy] : {std::pair{0, 0}, {h, 0}, {0, h}, {h, h}}) out.push_back({b.x + dx, b.y + dy, h});
   };
 
   std::vector<uint8_t> leaf_size(static_cast<size_t>(cw) * ch, 1);
-  std::vector<std::array<int, 3>> leaves;  // coarse leaves (x, y, size >= 2)
-  std::vector<std::array<int, 3>> stack;
+  auto set_size = [&](const Block& b, int size) {
+    for (int y = b.y; y < b.y + b.sy(ch); ++y)
+      for (int x = b.x; x < b.x + b.sx(cw); ++x) leaf_size[surface.cell(x, y)] = static_cast<uint8_t>(size);
+  };
+  std::vector<Block> leaves;  // coarse leaves (size >= 2)
+  std::vector<Block> stack;
   if (tolerance > 0) {
     for (int by = 0; by < ch; by += kMaxBlockCells)
       for (int bx = 0; bx < cw; bx += kMaxBlockCells) stack.push_back({bx, by, kMaxBlockCells});
   }
   while (!stack.empty()) {
-    const auto [bx, by, s] = stack.back();
+    const Block b = stack.back();
     stack.pop_back();
-    if (bx >= cw || by >= ch) continue;
-    if (all_full(bx, by, s) && surface.planar(bx, by, s, tolerance)) {
-      leaves.push_back({bx, by, s});
-      for (int y = by; y < by + s; ++y)
-        for (int x = bx; x < bx + s; ++x) leaf_size[surface.cell(x, y)] = static_cast<uint8_t>(s);
-    } else if (s > 2) {
-      const int h = s / 2;
-      stack.push_back({bx, by, h});
-      stack.push_back({bx + h, by, h});
-      stack.push_back({bx, by + h, h});
-      stack.push_back({bx + h, by + h, h});
+    if (b.x >= cw || b.y >= ch) continue;
+    if (2 * b.sx(cw) >= b.s && 2 * b.sy(ch) >= b.s && all_full(b) &&
+        surface.planar(b.x, b.y, b.sx(cw), b.sy(ch), tolerance)) {
+      leaves.push_back(b);
+      set_size(b, b.s);
+    } else if (b.s > 2) {
+      children(b, stack);
     }
   }
   // 2:1 balance: split a leaf while a cell beside it belongs to a leaf less than half its size.
   for (bool changed = true; changed;) {
     changed = false;
-    std::vector<std::array<int, 3>> next;
-    for (const auto& [bx, by, s] : leaves) {
-      int smallest = s;
-      for (int i = 0; i < s && smallest >= s / 2; ++i) {
-        if (by > 0) smallest = std::min<int>(smallest, leaf_size[surface.cell(bx + i, by - 1)]);
-        if (by + s < ch) smallest = std::min<int>(smallest, leaf_size[surface.cell(bx + i, by + s)]);
-        if (bx > 0) smallest = std::min<int>(smallest, leaf_size[surface.cell(bx - 1, by + i)]);
-        if (bx + s < cw) smallest = std::min<int>(smallest, leaf_size[surface.cell(bx + s, by + i)]);
+    std::vector<Block> next;
+    for (const Block& b : leaves) {
+      const int sx = b.sx(cw), sy = b.sy(ch);
+      int smallest = b.s;
+      for (int i = 0; i < sx; ++i) {
+        if (b.y > 0) smallest = std::min<int>(smallest, leaf_size[surface.cell(b.x + i, b.y - 1)]);
+        if (b.y + sy < ch) smallest = std::min<int>(smallest, leaf_size[surface.cell(b.x + i, b.y + sy)]);
       }
-      if (smallest >= s / 2) {
-        next.push_back({bx, by, s});
+      for (int i = 0; i < sy; ++i) {
+        if (b.x > 0) smallest = std::min<int>(smallest, leaf_size[surface.cell(b.x - 1, b.y + i)]);
+        if (b.x + sx < cw) smallest = std::min<int>(smallest, leaf_size[surface.cell(b.x + sx, b.y + i)]);
+      }
+      if (2 * smallest >= b.s) {
+        next.push_back(b);
         continue;
       }
       changed = true;
-      const int h = s / 2;
-      for (int y = by; y < by + s; ++y)
-        for (int x = bx; x < bx + s; ++x) leaf_size[surface.cell(x, y)] = static_cast<uint8_t>(h);
-      if (h >= 2) {
-        next.push_back({bx, by, h});
-        next.push_back({bx + h, by, h});
-        next.push_back({bx, by + h, h});
-        next.push_back({bx + h, by + h, h});
-      }
+      set_size(b, b.s / 2);
+      if (b.s / 2 < 2) continue;
+      std::vector<Block> parts;
+      children(b, parts);
+      for (const Block& c : parts)
+        if (c.x < cw && c.y < ch) next.push_back(c);
     }
     leaves.swap(next);
   }
 
   std::vector<uint8_t> keep(static_cast<size_t>(w) * surface.height(), 0);
-  for (const auto& [bx, by, s] : leaves)
-    for (int c = 0; c < 4; ++c) keep[static_cast<size_t>(by + kCorner[c][1] * s) * w + bx + kCorner[c][0] * s] = 1;
+  for (const Block& b : leaves)
+    for (int c = 0; c < 4; ++c) keep[static_cast<size_t>(b.y + kCorner[c][1] * b.sy(ch)) * w + b.x + kCorner[c][0] * b.sx(cw)] = 1;
   for (int y = 0; y < ch; ++y) {
     for (int x = 0; x < cw; ++x) {
       const uint8_t p = surface.piece(x, y);
@@ -622,16 +635,27 @@ MeshingResult mesh_range_image(const RangeImage& image, const MeshingParams& par
     return result;
   }
 
-  // Boundary of the domain: cell sides used by exactly one piece, and triangle diagonals.
-  std::vector<std::pair<size_t, size_t>> segments, diagonals;  // pixel index pairs
+  // Boundary of the domain: cell sides used by exactly one piece (flagged at their top or left
+  // pixel), and triangle diagonals.
+  const size_t n = image.pixel_count();
+  std::vector<uint8_t> h_side(n, 0), v_side(n, 0), degree(n, 0);
+  std::vector<std::pair<size_t, size_t>> diagonals;  // pixel index pairs
   auto mask = [&](int x, int y) { return (x >= 0 && y >= 0 && x < cw && y < ch) ? surface.side_mask(x, y) : 0; };
   for (int y = 0; y <= ch; ++y) {
     for (int x = 0; x <= cw; ++x) {
       const size_t i = image.index(x, y);
       // Horizontal side (x, y)-(x+1, y): bottom side (2) of the cell above, top side (0) of the cell below.
-      if (x < cw && (((mask(x, y - 1) >> 2) ^ mask(x, y)) & 1)) segments.emplace_back(i, i + 1);
+      if (x < cw && (((mask(x, y - 1) >> 2) ^ mask(x, y)) & 1)) {
+        h_side[i] = 1;
+        ++degree[i];
+        ++degree[i + 1];
+      }
       // Vertical side (x, y)-(x, y+1): right side (1) of the cell to the left, left side (3) of the cell.
-      if (y < ch && (((mask(x - 1, y) >> 1) ^ (mask(x, y) >> 3)) & 1)) segments.emplace_back(i, i + w);
+      if (y < ch && (((mask(x - 1, y) >> 1) ^ (mask(x, y) >> 3)) & 1)) {
+        v_side[i] = 1;
+        ++degree[i];
+        ++degree[i + w];
+      }
       if (x < cw && y < ch && surface.piece(x, y) >= kTri) {
         const int k = surface.piece(x, y) - kTri;
         diagonals.emplace_back(surface.corner_pixel(x, y, (k + 3) % 4), surface.corner_pixel(x, y, (k + 1) % 4));
@@ -639,8 +663,23 @@ MeshingResult mesh_range_image(const RangeImage& image, const MeshingParams& par
     }
   }
 
-  // Pixels to triangulate: the quadtree's choice plus every boundary pixel.
+  // Pixels to triangulate: the quadtree's choice and the boundary's. A boundary pixel inside a
+  // straight run of sides is left out when the quadtree does not need it (it lies on the side of a
+  // coarse, planar block): the run becomes one constraint, which the refinement splits as needed.
   std::vector<uint8_t> keep = thin(surface, params.thinning_tolerance);
+  for (const auto& [a, b] : diagonals) degree[a] = degree[b] = 4;  // never inside a straight run
+  auto inner = [&](size_t i, const std::vector<uint8_t>& side, size_t step) {
+    return !keep[i] && degree[i] == 2 && side[i] && i >= step && side[i - step];
+  };
+  std::vector<std::pair<size_t, size_t>> segments;  // pixel index pairs
+  for (const auto& [side, step] : {std::pair{&h_side, size_t{1}}, std::pair{&v_side, static_cast<size_t>(w)}}) {
+    for (size_t i = 0; i < n; ++i) {
+      if (!(*side)[i] || inner(i, *side, step)) continue;
+      size_t j = i + step;
+      while (inner(j, *side, step)) j += step;
+      segments.emplace_back(i, j);
+    }
+  }
   for (const auto& [a, b] : segments) keep[a] = keep[b] = 1;
   for (const auto& [a, b] : diagonals) keep[a] = keep[b] = 1;
   std::vector<Point2> points;
@@ -653,16 +692,7 @@ MeshingResult mesh_range_image(const RangeImage& image, const MeshingParams& par
   std::vector<std::pair<size_t, size_t>> constraints;
   constraints.reserve(segments.size());
   for (const auto& [a, b] : segments) constraints.emplace_back(point_of_pixel[a], point_of_pixel[b]);
-  // A diagonal's own triangle has its right angle on the diagonal's diametral circle, which
-  // Delaunay_mesher_2 counts as encroaching and resolves with off-pixel cluster splits. Split each
-  // diagonal at its midpoint up front instead: the halves are not encroached by the pixel grid.
-  for (const auto& [a, b] : diagonals) {
-    if (getenv("NOSPLIT")) { constraints.emplace_back(point_of_pixel[a], point_of_pixel[b]); continue; }
-    const size_t m = points.size();
-    points.emplace_back(0.5 * static_cast<double>(a % w + b % w), 0.5 * static_cast<double>(a / w + b / w));
-    constraints.emplace_back(point_of_pixel[a], m);
-    constraints.emplace_back(m, point_of_pixel[b]);
-  }
+  for (const auto& [a, b] : diagonals) constraints.emplace_back(point_of_pixel[a], point_of_pixel[b]);
   result.constraint_edge_count = constraints.size();
   if (points.size() < 3) {
     result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -8,22 +8,16 @@
 #include <Eigen/Geometry>
 
 #include "artisan/core/error.hpp"
+#include "correspondence_grouping.hpp"
 
 namespace artisan {
 
 namespace {
 
+using detail::Correspondence;
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-struct Correspondence {
-  size_t source;  // index into the resampled source cloud
-  size_t target;  // index into the resampled target cloud
-  float similarity;
-};
-
-// Spin images normalised so that a dot product is their correlation coefficient, and a 0/1
-// mask of occupied bins so that a dot product counts overlapping bins.
 void normalise(const SpinImageStack& stack, Eigen::MatrixXf& z, Eigen::MatrixXf& mask) {
   const int bins = stack.width * stack.width;
   z.resize(bins, static_cast<Eigen::Index>(stack.size()));
@@ -36,39 +30,6 @@ void normalise(const SpinImageStack& stack, Eigen::MatrixXf& z, Eigen::MatrixXf&
     z.col(static_cast<Eigen::Index>(k)) = norm > 0 ? Eigen::VectorXf(c / norm) : Eigen::VectorXf::Zero(bins);
     mask.col(static_cast<Eigen::Index>(k)) = (v.array() > 0).cast<float>();
   }
-}
-
-// Relative disagreement of the spin-map coordinates of two correspondences (eq. 9), made
-// symmetric, and the grouping distance that discounts nearby pairs (eq. 10).
-struct Consistency {
-  float d_gc;
-  float w_gc;
-};
-Consistency consistency(const PointCloud& src, const PointCloud& tgt, const Correspondence& a, const Correspondence& b, float gamma) {
-  const Eigen::Vector2f s_ab = spin_coordinates(src.points[a.source], src.normals[a.source], src.points[b.source]);
-  const Eigen::Vector2f t_ab = spin_coordinates(tgt.points[a.target], tgt.normals[a.target], tgt.points[b.target]);
-  const Eigen::Vector2f s_ba = spin_coordinates(src.points[b.source], src.normals[b.source], src.points[a.source]);
-  const Eigen::Vector2f t_ba = spin_coordinates(tgt.points[b.target], tgt.normals[b.target], tgt.points[a.target]);
-  auto d = [](const Eigen::Vector2f& s, const Eigen::Vector2f& t) {
-    const float scale = 0.5f * (s.norm() + t.norm());
-    return scale > 0 ? (s - t).norm() / scale : 0.0f;
-  };
-  auto w = [gamma](float dgc, const Eigen::Vector2f& s, const Eigen::Vector2f& t) {
-    return dgc / (1.0f - std::exp(-0.5f * (s.norm() + t.norm()) / gamma) + 1e-9f);
-  };
-  const float d1 = d(s_ab, t_ab), d2 = d(s_ba, t_ba);
-  return {std::max(d1, d2), std::max(w(d1, s_ab, t_ab), w(d2, s_ba, t_ba))};
-}
-
-Transform transform_from(const PointCloud& src, const PointCloud& tgt, const std::vector<Correspondence>& group) {
-  Eigen::Matrix3Xd from(3, group.size()), to(3, group.size());
-  for (size_t k = 0; k < group.size(); ++k) {
-    from.col(static_cast<Eigen::Index>(k)) = src.points[group[k].source].cast<double>();
-    to.col(static_cast<Eigen::Index>(k)) = tgt.points[group[k].target].cast<double>();
-  }
-  Transform T = Transform::Identity();
-  T.matrix() = Eigen::umeyama(from, to, false);
-  return T;
 }
 
 double resolution_of(const TriangleMesh& mesh) {
@@ -172,47 +133,15 @@ RegistrationResult register_meshes(const TriangleMesh& target, const TriangleMes
     result.seconds_matching = since(t0);
     return result;
   }
-  const float best_similarity = std::max_element(candidates.begin(), candidates.end(), [](auto& a, auto& b) { return a.similarity < b.similarity; })->similarity;
-  std::erase_if(candidates, [&](const Correspondence& c) { return c.similarity < mp.similarity_ratio * best_similarity; });
-  std::sort(candidates.begin(), candidates.end(), [](auto& a, auto& b) { return a.similarity > b.similarity; });
-  if (candidates.size() > 1500) candidates.resize(1500);
-
-  // Geometric consistency (section 5.1): drop matches consistent with under a quarter of the others.
-  const size_t n = candidates.size();
-  const float gamma = static_cast<float>(mp.gamma_factor * res);
-  std::vector<Consistency> pair(n * n);
-#pragma omp parallel for schedule(dynamic, 16)
-  for (size_t a = 0; a < n; ++a)
-    for (size_t b = 0; b < n; ++b) pair[a * n + b] = a == b ? Consistency{0, 0} : consistency(src, tgt, candidates[a], candidates[b], gamma);
-  std::vector<size_t> kept;
-  for (size_t a = 0; a < n; ++a) {
-    size_t consistent = 0;
-    for (size_t b = 0; b < n; ++b) consistent += b != a && pair[a * n + b].d_gc < mp.geometric_consistency;
-    if (4 * consistent >= n - 1 || n < 8) kept.push_back(a);
-  }
-  result.candidate_correspondences = kept.size();
-
-  // Grouping (section 5.2): from each seed, add matches whose grouping distance to every member
-  // stays below T_gc; each group of at least min_group_size gives a transform.
-  struct Candidate {
-    Transform T;
-    size_t size;
-  };
-  std::vector<Candidate> transforms;
-  for (size_t s = 0; s < kept.size() && static_cast<int>(transforms.size()) < mp.max_groups; ++s) {
-    std::vector<size_t> group = {kept[s]};
-    for (size_t c : kept) {
-      if (c == kept[s]) continue;
-      bool ok = true;
-      for (size_t g : group)
-        if (pair[c * n + g].w_gc >= mp.geometric_consistency) { ok = false; break; }
-      if (ok) group.push_back(c);
-    }
-    if (static_cast<int>(group.size()) < mp.min_group_size) continue;
-    std::vector<Correspondence> members;
-    for (size_t g : group) members.push_back(candidates[g]);
-    transforms.push_back({transform_from(src, tgt, members), group.size()});
-  }
+  detail::GroupingParams grouping;
+  grouping.similarity_ratio = mp.similarity_ratio;
+  grouping.geometric_consistency = mp.geometric_consistency;
+  grouping.gamma_m = mp.gamma_factor * res;
+  grouping.max_groups = mp.max_groups;
+  grouping.min_group_size = mp.min_group_size;
+  const auto grouped = detail::group_correspondences(src, tgt, std::move(candidates), grouping);
+  result.candidate_correspondences = grouped.consistent_candidates;
+  const auto& transforms = grouped.groups;
   result.seconds_matching = since(t0);
   if (transforms.empty()) {
     result.failure = "no geometrically consistent group of " + std::to_string(mp.min_group_size) + " matches";
@@ -230,7 +159,7 @@ RegistrationResult register_meshes(const TriangleMesh& target, const TriangleMes
   double best_score = -1;
   Transform best = Transform::Identity();
   for (const auto& c : transforms) {
-    const auto r = icp_point_to_plane(src, tgt, tgt_tree, c.T, coarse);
+    const auto r = icp_point_to_plane(src, tgt, tgt_tree, c.T_target_source, coarse);
     const double score = r.overlap_fraction - 0.1 * r.rmse_m / res;
     ++result.groups_verified;
     if (score > best_score) {

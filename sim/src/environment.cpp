@@ -50,14 +50,16 @@ double path_length_in_bodies(const Workcell& cell, const Eigen::Vector3d& a, con
       if (std::abs(det) < 1e-18) continue;
       const Eigen::Vector3d tv = o - v0;
       const double u = tv.dot(pv) / det;
-      if (u < 0 || u > 1) continue;
+      if (u < -1e-12 || u > 1 + 1e-12) continue;
       const Eigen::Vector3d qv = tv.cross(e1);
       const double v = dir.dot(qv) / det;
-      if (v < 0 || u + v > 1) continue;
+      if (v < -1e-12 || u + v > 1 + 1e-12) continue;
       const double t = e2.dot(qv) / det;
       if (t > 0 && t < 1) ts.push_back(t);
     }
     std::sort(ts.begin(), ts.end());
+    // A crossing through a shared edge or vertex is found once per triangle: count it once.
+    ts.erase(std::unique(ts.begin(), ts.end(), [&](double x, double y) { return (y - x) * len < 1e-9; }), ts.end());
     // Crossings pair up (enter, leave); an odd count means an end lies inside: close at 1.
     for (size_t k = 0; k < ts.size(); k += 2) inside += ((k + 1 < ts.size() ? ts[k + 1] : 1.0) - ts[k]) * len;
   }

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include "artisan/sim/renderer.hpp"
 #include "artisan/sim/shapes.hpp"
@@ -44,6 +45,7 @@ TEST(SimRender, FrontoParallelPlaneDepthIsExact) {
     worst = std::max(worst, std::abs(r.depth_m[i] - d));
     EXPECT_EQ(r.instance_ids[i], 1);
   }
+  std::printf("fronto-parallel plane: worst depth error %.3g m\n", worst);
   EXPECT_LT(worst, 2e-5) << "worst depth error " << worst;
   ASSERT_EQ(r.color.width, 160);
 }
@@ -77,6 +79,7 @@ TEST(SimRender, TiltedPlaneUnprojectsOntoThePlane) {
     worst = std::max(worst, std::abs((pts[i].cast<double>() - T_world_plane.translation()).dot(normal)));
   }
   EXPECT_GT(n, 200 * 150 * 9 / 10);
+  std::printf("tilted plane: worst distance %.3g m\n", worst);
   EXPECT_LT(worst, 5e-5) << "worst distance to the plane " << worst;
 }
 
@@ -112,6 +115,7 @@ TEST(SimRender, SphereUnprojectsOntoTheSphereAndSilhouetteIsExact) {
       if (miss_angle > 1.5 * pixel_angle && r.instance_ids[i] != 0) ++mismatches;
     }
   EXPECT_GT(hits, 1000);
+  std::printf("sphere: worst distance %.3g m, silhouette mismatches %d\n", worst, mismatches);
   EXPECT_LT(worst, 2e-5) << "worst distance to the sphere " << worst;
   EXPECT_EQ(mismatches, 0);
 }

@@ -35,6 +35,11 @@ struct MeshingParams {
   /// from the two points themselves, so the rule holds for any range and sensor geometry. It cuts
   /// every surface inclined more than atan(k) from facing the sensor (4 -> 76 degrees).
   double depth_jump_ratio = 4.0;
+  /// [deg] a half cell (a triangle of three valid pixels, where the fourth is missing or across a
+  /// depth jump) is meshed only when it covers a pixel that no full cell covers and faces the
+  /// sensor within this angle. Steeper half cells sit on noisy silhouettes, and Delaunay
+  /// refinement around their 45-degree corners makes sub-pixel triangles that are slivers in 3-D.
+  double half_cell_max_inclination_deg = 70.0;
   /// [deg] smallest triangle angle in the image plane after refinement. At most 20.7 (CGAL's
   /// bound B = sqrt(2), the largest for which Delaunay refinement is proven to terminate).
   double min_angle_deg = 20.7;

@@ -1,0 +1,98 @@
+#include "correspondence_grouping.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Geometry>
+
+#include "artisan/perception/spin_image.hpp"
+
+namespace artisan::detail {
+
+namespace {
+
+// Relative disagreement of the spin-map coordinates of two correspondences (eq. 9), made
+// symmetric, and the grouping distance that discounts nearby pairs (eq. 10).
+struct Consistency {
+  float d_gc;
+  float w_gc;
+};
+
+Consistency consistency(const PointCloud& src, const PointCloud& tgt, const Correspondence& a, const Correspondence& b, float gamma) {
+  const Eigen::Vector2f s_ab = spin_coordinates(src.points[a.source], src.normals[a.source], src.points[b.source]);
+  const Eigen::Vector2f t_ab = spin_coordinates(tgt.points[a.target], tgt.normals[a.target], tgt.points[b.target]);
+  const Eigen::Vector2f s_ba = spin_coordinates(src.points[b.source], src.normals[b.source], src.points[a.source]);
+  const Eigen::Vector2f t_ba = spin_coordinates(tgt.points[b.target], tgt.normals[b.target], tgt.points[a.target]);
+  auto d = [](const Eigen::Vector2f& s, const Eigen::Vector2f& t) {
+    const float scale = 0.5f * (s.norm() + t.norm());
+    return scale > 0 ? (s - t).norm() / scale : 0.0f;
+  };
+  auto w = [gamma](float dgc, const Eigen::Vector2f& s, const Eigen::Vector2f& t) {
+    return dgc / (1.0f - std::exp(-0.5f * (s.norm() + t.norm()) / gamma) + 1e-9f);
+  };
+  const float d1 = d(s_ab, t_ab), d2 = d(s_ba, t_ba);
+  return {std::max(d1, d2), std::max(w(d1, s_ab, t_ab), w(d2, s_ba, t_ba))};
+}
+
+Transform transform_from(const PointCloud& src, const PointCloud& tgt, const std::vector<Correspondence>& group) {
+  Eigen::Matrix3Xd from(3, group.size()), to(3, group.size());
+  for (size_t k = 0; k < group.size(); ++k) {
+    from.col(static_cast<Eigen::Index>(k)) = src.points[group[k].source].cast<double>();
+    to.col(static_cast<Eigen::Index>(k)) = tgt.points[group[k].target].cast<double>();
+  }
+  Transform T = Transform::Identity();
+  T.matrix() = Eigen::umeyama(from, to, false);
+  return T;
+}
+
+}  // namespace
+
+GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tgt, std::vector<Correspondence> candidates,
+                                     const GroupingParams& params) {
+  GroupingResult result;
+  if (candidates.empty()) return result;
+  const float best = std::max_element(candidates.begin(), candidates.end(), [](auto& a, auto& b) { return a.similarity < b.similarity; })->similarity;
+  std::erase_if(candidates, [&](const Correspondence& c) { return c.similarity < params.similarity_ratio * best; });
+  std::sort(candidates.begin(), candidates.end(), [](auto& a, auto& b) { return a.similarity > b.similarity; });
+  if (candidates.size() > params.max_candidates) candidates.resize(params.max_candidates);
+
+  // Geometric consistency (section 5.1): drop matches consistent with under a quarter of the others.
+  const size_t n = candidates.size();
+  const float gamma = static_cast<float>(params.gamma_m);
+  std::vector<Consistency> pair(n * n);
+#pragma omp parallel for schedule(dynamic, 16)
+  for (size_t a = 0; a < n; ++a)
+    for (size_t b = 0; b < n; ++b) pair[a * n + b] = a == b ? Consistency{0, 0} : consistency(src, tgt, candidates[a], candidates[b], gamma);
+  std::vector<size_t> kept;
+  for (size_t a = 0; a < n; ++a) {
+    size_t consistent = 0;
+    for (size_t b = 0; b < n; ++b) consistent += b != a && pair[a * n + b].d_gc < params.geometric_consistency;
+    if (4 * consistent >= n - 1 || n < 8) kept.push_back(a);
+  }
+  result.consistent_candidates = kept.size();
+
+  // Grouping (section 5.2): from each seed, add matches whose grouping distance to every member
+  // stays below T_gc; each group of at least min_group_size gives a transform.
+  for (size_t s = 0; s < kept.size() && static_cast<int>(result.groups.size()) < params.max_groups; ++s) {
+    std::vector<size_t> group = {kept[s]};
+    for (size_t c : kept) {
+      if (c == kept[s]) continue;
+      bool ok = true;
+      for (size_t g : group)
+        if (pair[c * n + g].w_gc >= params.geometric_consistency) {
+          ok = false;
+          break;
+        }
+      if (ok) group.push_back(c);
+    }
+    if (static_cast<int>(group.size()) < params.min_group_size) continue;
+    GroupedTransform g;
+    for (size_t k : group) g.members.push_back(candidates[k]);
+    g.size = group.size();
+    g.T_target_source = transform_from(src, tgt, g.members);
+    result.groups.push_back(std::move(g));
+  }
+  return result;
+}
+
+}  // namespace artisan::detail

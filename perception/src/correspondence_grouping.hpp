@@ -1,0 +1,41 @@
+#pragma once
+// Private: the correspondence stages shared by registration and recognition (Johnson & Hebert,
+// PAMI 1999, section 5): similarity filtering, geometric consistency, grouping, a transform per
+// group.
+#include <vector>
+
+#include "artisan/core/pose.hpp"
+#include "artisan/core/triangle_mesh.hpp"
+
+namespace artisan::detail {
+
+struct Correspondence {
+  size_t source;  ///< index into the source (scene) oriented points
+  size_t target;  ///< index into the target (model) oriented points
+  float similarity;
+};
+
+struct GroupingParams {
+  double similarity_ratio = 0.5;        ///< [1] drop matches below this share of the best similarity
+  double geometric_consistency = 0.25;  ///< [1] T_gc (eq. 9)
+  double gamma_m = 0.0;                 ///< [m] gamma of the grouping distance (eq. 10)
+  int max_groups = 40;
+  int min_group_size = 3;
+  size_t max_candidates = 1500;         ///< strongest matches kept for the quadratic stages
+};
+
+struct GroupedTransform {
+  Transform T_target_source;
+  size_t size;
+  std::vector<Correspondence> members;
+};
+
+struct GroupingResult {
+  std::vector<GroupedTransform> groups;
+  size_t consistent_candidates = 0;
+};
+
+GroupingResult group_correspondences(const PointCloud& source, const PointCloud& target, std::vector<Correspondence> candidates,
+                                     const GroupingParams& params);
+
+}  // namespace artisan::detail
