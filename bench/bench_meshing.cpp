@@ -89,7 +89,9 @@ int main() {
   nlohmann::json out;
   out["benchmark"] = "meshing";
   out["params"] = {{"depth_jump_ratio", params.depth_jump_ratio},
+                   {"half_cell_max_inclination_deg", params.half_cell_max_inclination_deg},
                    {"min_angle_deg", params.min_angle_deg},
+                   {"min_angle_3d_deg", params.min_angle_3d_deg},
                    {"max_edge_length_m", params.max_edge_length_m},
                    {"thinning_tolerance", params.thinning_tolerance}};
   const std::string dir = std::string(ARTISAN_DATA_DIR) + "/stanford-bunny/";

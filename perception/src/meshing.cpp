@@ -344,11 +344,12 @@ class RangeMeshCriteria {
 
   class Is_bad {
    public:
-    Is_bad(const RangeMeshCriteria& c) : c_(c) {}
+    Is_bad(double b, double b_3d, double sq_max_edge, const RangeSurface* surface)
+        : b_(b), b_3d_(b_3d), sq_max_edge_(sq_max_edge), surface_(surface) {}
 
     CGAL::Mesh_2::Face_badness operator()(const Quality& q) const {
       if (q.size > 1) return CGAL::Mesh_2::IMPERATIVELY_BAD;
-      return q.sine < c_.b_ || q.sine_3d < c_.b_3d_ ? CGAL::Mesh_2::BAD : CGAL::Mesh_2::NOT_BAD;
+      return q.sine < b_ || q.sine_3d < b_3d_ ? CGAL::Mesh_2::BAD : CGAL::Mesh_2::NOT_BAD;
     }
 
     CGAL::Mesh_2::Face_badness operator()(const Cdt::Face_handle& fh, Quality& q) const {
@@ -361,12 +362,12 @@ class RangeMeshCriteria {
       q = Quality();
       q.sine = squared_min_sine(a, b, c, twice_area * twice_area);
       if (std::max({a, b, c}) > kMinSplitPixels * kMinSplitPixels) {
-        const Eigen::Vector3d p = c_.surface_->position(pa.x(), pa.y());
-        const Eigen::Vector3d r = c_.surface_->position(pb.x(), pb.y());
-        const Eigen::Vector3d t = c_.surface_->position(pc.x(), pc.y());
+        const Eigen::Vector3d p = surface_->position(pa.x(), pa.y());
+        const Eigen::Vector3d r = surface_->position(pb.x(), pb.y());
+        const Eigen::Vector3d t = surface_->position(pc.x(), pc.y());
         const double a3 = (r - t).squaredNorm(), b3 = (t - p).squaredNorm(), c3 = (p - r).squaredNorm();
         if (std::isfinite(a3 + b3 + c3)) {
-          q.size = std::max({a3, b3, c3}) / c_.sq_max_edge_;
+          q.size = std::max({a3, b3, c3}) / sq_max_edge_;
           q.sine_3d = squared_min_sine(a3, b3, c3, (r - p).cross(t - p).squaredNorm());
         }
       }
@@ -381,7 +382,8 @@ class RangeMeshCriteria {
       const double product = a * b * c / std::max(shortest, 1e-300);
       return product > 0 ? twice_area_sq / product : 0.0;
     }
-    const RangeMeshCriteria& c_;
+    double b_, b_3d_, sq_max_edge_;
+    const RangeSurface* surface_;
   };
 
   RangeMeshCriteria(const MeshingParams& params, const RangeSurface* surface)
@@ -389,7 +391,7 @@ class RangeMeshCriteria {
         b_3d_(std::pow(std::sin(params.min_angle_3d_deg * kPi / 180.0), 2)),
         sq_max_edge_(params.max_edge_length_m * params.max_edge_length_m),
         surface_(surface) {}
-  Is_bad is_bad_object() const { return Is_bad(*this); }
+  Is_bad is_bad_object() const { return Is_bad(b_, b_3d_, sq_max_edge_, surface_); }
 
  private:
   double b_, b_3d_, sq_max_edge_;
@@ -433,15 +435,17 @@ void check_params(const RangeImage& image, const MeshingParams& params) {
   }
 }
 
-// Smallest angle of a triangle [deg], in 2-D or 3-D.
+// Smallest angle of a triangle [deg], in 2-D or 3-D: sin(smallest) = 2 area / (product of the
+// two longer sides); the smallest angle is at most 60 degrees, so asin is unambiguous.
+double twice_area(const Eigen::Vector2d& e, const Eigen::Vector2d& f) { return std::abs(e.x() * f.y() - e.y() * f.x()); }
+double twice_area(const Eigen::Vector3d& e, const Eigen::Vector3d& f) { return e.cross(f).norm(); }
+
 template <class Vec>
 double min_angle_deg(const Vec& a, const Vec& b, const Vec& c) {
-  auto angle = [](const Vec& p, const Vec& q, const Vec& r) {
-    const Vec e = q - p, f = r - p;
-    const double d = e.dot(f);
-    return std::atan2(std::sqrt(std::max(0.0, e.squaredNorm() * f.squaredNorm() - d * d)), d);
-  };
-  return std::min({angle(a, b, c), angle(b, c, a), angle(c, a, b)}) * 180.0 / kPi;
+  const double ab = (b - a).squaredNorm(), bc = (c - b).squaredNorm(), ca = (a - c).squaredNorm();
+  const double longer_product = std::sqrt(ab * bc * ca / std::max(std::min({ab, bc, ca}), 1e-300));
+  if (!(longer_product > 0)) return 0.0;
+  return std::asin(std::min(1.0, twice_area(Vec(b - a), Vec(c - a)) / longer_product)) * 180.0 / kPi;
 }
 
 // Data-dependent edge flips (Dyn, Levin & Rippa, "Data dependent triangulations for piecewise

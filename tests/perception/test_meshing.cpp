@@ -307,9 +307,10 @@ TEST(SyntheticMeshing, PlaneGivesFewFacesAtExactDepth) {
 }
 
 // Method: a sphere of radius 0.3 m at 1.2 m on an empty background. Every vertex must lie on the
-// sphere (pixel vertices are exact; interpolated ones sit on chords of a pixel), every measured
-// point must lie within twice the thinning tolerance (times the sample spacing at its range) of
-// the mesh, and vertex normals must match the sphere's outward normal, which faces the sensor.
+// sphere (pixel vertices are exact; interpolated ones sit on chords of a pixel), vertex normals
+// must match the sphere's outward normal (which faces the sensor), and every measured point where
+// the sphere faces the camera within 70 degrees (the jump rule cuts the rim beyond 76 degrees) must
+// lie within twice the thinning tolerance times the sample spacing at its range (z / f) of the mesh.
 TEST(SyntheticMeshing, SphereVerticesLieOnTheSphere) {
   const test::AnalyticSphere sphere{Eigen::Vector3d(0.05, -0.03, 1.2), 0.3};
   test::AnalyticScene scene;
@@ -327,16 +328,17 @@ TEST(SyntheticMeshing, SphereVerticesLieOnTheSphere) {
     bad_normals += r.mesh.normals[v].cast<double>().dot(outward) < std::cos(5.0 * M_PI / 180);
   }
   EXPECT_LT(static_cast<double>(bad_normals), 0.01 * r.mesh.vertices.size());
-  // Thinning bound: sample spacing at range z is z / f.
   const test::TriangleDistance distance(r.mesh.vertices, r.mesh.faces, 0.01);
-  size_t beyond = 0;
+  size_t checked = 0, beyond = 0;
   for (size_t i = 0; i < image.pixel_count(); ++i) {
     if (!image.valid[i]) continue;
     const Eigen::Vector3d p = image.points_sensor[i].cast<double>();
-    const double bound = 2 * params.thinning_tolerance * p.norm() / camera.fx;
-    beyond += distance.distance(p) > bound;
+    if (std::abs((p - sphere.centre).normalized().dot(p.normalized())) < std::cos(70.0 * M_PI / 180)) continue;
+    ++checked;
+    beyond += distance.distance(p) > 2 * params.thinning_tolerance * p.z() / camera.fx;
   }
-  EXPECT_LT(static_cast<double>(beyond), 0.01 * image.valid_count()) << beyond << " points beyond the bound";
+  EXPECT_GT(checked, image.valid_count() * 8 / 10);
+  EXPECT_EQ(beyond, 0u) << "of " << checked;
   EXPECT_LE(3 * r.face_count, full_grid_faces(image));
 }
 
@@ -488,26 +490,38 @@ TEST(MeshingBadInput, ThrowsNamingTheValue) {
 
 // ---- remeshing ----
 
-// Method: remesh the bun000 mesh to 2 mm edges; the median edge must be within 20% of the target,
-// every new vertex must lie on the input surface (within 0.05 mm), and the area must stay within
-// 2%.
+// Method: remesh the bun000 mesh to 2 mm edges. The median edge must be within 20% of the target;
+// interior vertices must lie on the input surface (within 0.05 mm); border vertices may cut the
+// input's pixel staircase, so within half the target; the area may shrink by that corner cutting
+// only, under 3%; normals keep facing the sensor (+z).
 TEST(Remeshing, BunnyToTwoMillimetreEdges) {
   const auto& input = bunny("bun000").result.mesh;
-  const auto output = remesh_to_resolution(input, 0.002);
+  const double target = 0.002;
+  const auto output = remesh_to_resolution(input, target);
   EXPECT_NO_THROW(output.validate());
   ASSERT_EQ(output.normals.size(), output.vertices.size());
-  EXPECT_NEAR(mesh_resolution(output), 0.002, 0.0004);
-  const test::TriangleDistance surface(input.vertices, input.faces, 0.001);
-  double worst = 0;
-  for (const auto& v : output.vertices) worst = std::max(worst, surface.distance(v.cast<double>()));
-  EXPECT_LE(worst, 0.00005);
+  EXPECT_NEAR(mesh_resolution(output), target, 0.2 * target);
+  std::map<std::pair<int, int>, int> edges;
+  for (const auto& f : output.faces)
+    for (int k = 0; k < 3; ++k) ++edges[std::minmax(f[k], f[(k + 1) % 3])];
+  std::vector<uint8_t> border(output.vertices.size(), 0);
+  for (const auto& [e, count] : edges)
+    if (count == 1) border[e.first] = border[e.second] = 1;
+  const test::TriangleDistance surface(input.vertices, input.faces, target);
+  double worst_interior = 0, worst_border = 0;
+  for (size_t v = 0; v < output.vertices.size(); ++v) {
+    const double d = surface.distance(output.vertices[v].cast<double>());
+    (border[v] ? worst_border : worst_interior) = std::max(border[v] ? worst_border : worst_interior, d);
+  }
+  EXPECT_LE(worst_interior, 0.00005);
+  EXPECT_LE(worst_border, 0.5 * target);
   auto area = [](const TriangleMesh& m) {
     double a = 0;
     for (const auto& f : m.faces) a += 0.5 * (m.vertices[f[1]] - m.vertices[f[0]]).cross(m.vertices[f[2]] - m.vertices[f[0]]).norm();
     return a;
   };
-  EXPECT_NEAR(area(output) / area(input), 1.0, 0.02);
-  // Orientation is kept: normals still face the sensor (+z) on the whole.
+  EXPECT_GT(area(output) / area(input), 0.97);
+  EXPECT_LE(area(output) / area(input), 1.0);
   size_t toward = 0;
   for (const auto& n : output.normals) toward += n.z() > 0;
   EXPECT_GT(static_cast<double>(toward), 0.99 * output.normals.size());

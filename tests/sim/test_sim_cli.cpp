@@ -73,3 +73,33 @@ TEST(SimCli, ErrorsAndRender) {
 
 }  // namespace
 }  // namespace artisan::sim
+
+namespace artisan::sim {
+namespace {
+
+TEST(SimCli, ScanWithDbImportsTheAcquisitionAsAnImage) {
+  // Method: a Vivid scan with --db lands in the workspace as an image whose range data is the
+  // file written beside it, bit for bit, with the environmental readings and the sensor pose.
+  artisan::test::TempDir dir;
+  const std::string db = " --db " + (dir / "ws.db").string();
+  ASSERT_EQ(artisan::test::run_command(kCli + db + " init").exit_code, 0);
+  ASSERT_EQ(artisan::test::run_command(kCli + db + " mkdir /cell").exit_code, 0);
+  auto r = artisan::test::run_command(kCli + db + " --json sim scan " + kCell + " --sensor vivid --seed 3 --folder /cell --name view1 --out " +
+                                      (dir / "view1").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("\"path\": \"/cell/view1\""), std::string::npos) << r.out;
+  r = artisan::test::run_command(kCli + db + " export /cell/view1 --out " + (dir / "back.ari").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(artisan::io::read_range_image(dir / "back.ari") == artisan::io::read_range_image(dir / "view1" / "range.ari"));
+  r = artisan::test::run_command(kCli + db + " --json show /cell/view1");
+  EXPECT_NE(r.out.find("dose_rate_uSv_per_h"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("T_world_sensor"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"operation\": \"sim-scan\""), std::string::npos) << r.out;
+  // A missing folder is refused before scanning, and nothing is written.
+  r = artisan::test::run_command(kCli + db + " sim scan " + kCell + " --sensor vivid --folder /nowhere --out " + (dir / "view2").string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_FALSE(std::filesystem::exists(dir / "view2"));
+}
+
+}  // namespace
+}  // namespace artisan::sim
