@@ -527,7 +527,9 @@ TEST(Remeshing, BunnyToTwoMillimetreEdges) {
   EXPECT_GT(static_cast<double>(toward), 0.99 * output.normals.size());
 }
 
-TEST(Remeshing, BadInputThrows) {
+// Method: a non-positive target and an empty mesh throw naming the value; a flat unit square
+// remeshed to 0.1 m stays flat and gets refined.
+TEST(Remeshing, BadInputThrowsAndAFlatSquareStaysFlat) {
   TriangleMesh square;
   square.vertices = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
   square.faces = {{0, 1, 2}, {0, 2, 3}};

@@ -3,7 +3,9 @@
 // image plane with a minimum-angle guarantee (Ruppert's Delaunay refinement as in Shewchuk's
 // Triangle; CGAL Delaunay_mesher_2). Constraints follow the boundary of the valid region, which
 // includes every depth discontinuity, so no triangle bridges a jump or covers a hole. Flat
-// regions are thinned by an adaptive quadtree before triangulation.
+// regions are thinned by an adaptive quadtree before triangulation; edge flips then improve the
+// triangles' shape in 3-D without breaking the image-plane bound. The method in full is in
+// perception/src/meshing.cpp.
 #include <cstddef>
 #include <optional>
 #include <vector>
@@ -50,8 +52,8 @@ struct MeshingParams {
   double max_edge_length_m = 0.1;
   /// [1] thinning tolerance as a fraction of the local sample spacing (the 3-D distance across
   /// the ray between neighbouring pixels). A quadtree block of pixels becomes one coarse cell
-  /// when every point in it lies within tolerance * spacing of the block's least-squares plane.
-  /// 0 keeps every pixel.
+  /// when every point in it lies within tolerance * spacing of the block's least-squares plane,
+  /// so the mesh stays within about twice that of the measured points. 0 keeps every pixel.
   double thinning_tolerance = 0.5;
   /// [pixels] region of interest, inclusive min and max (x, y) corners; unset: the whole image.
   std::optional<Eigen::AlignedBox2i> roi_pixels;
@@ -68,7 +70,7 @@ struct MeshingResult {
   size_t valid_pixel_count = 0;          ///< measured pixels inside the ROI
   size_t full_grid_face_count = 0;       ///< faces of the full-resolution grid mesh: 2 per 2x2 block of valid pixels
   size_t discontinuity_edge_count = 0;   ///< 4-neighbour pixel pairs, both valid, that are depth jumps
-  size_t constraint_edge_count = 0;      ///< boundary segments of the valid region given to the triangulation (cell diagonals in two halves)
+  size_t constraint_edge_count = 0;      ///< boundary segments given to the triangulation (straight runs merged)
   size_t steiner_vertex_count = 0;       ///< vertices added by refinement (depth interpolated)
   double resolution_m = 0.0;             ///< median 3-D edge length [m]
   double min_angle_image_deg = 0.0;      ///< smallest triangle angle in the image plane [deg]
@@ -84,8 +86,10 @@ MeshingResult mesh_range_image(const RangeImage& image, const MeshingParams& par
 double mesh_resolution(const TriangleMesh& mesh);
 
 /// Resamples a mesh to edges of about target_edge_m [m] with CGAL isotropic remeshing (Botsch &
-/// Kobbelt 2004: split, collapse, flip, tangential relaxation, 3 iterations). Borders stay on
-/// the input's borders. The result has vertices, faces and normals; uv, colours and texture are
+/// Kobbelt 2004: split, collapse, flip, tangential relaxation with projection onto the input,
+/// 3 iterations). Borders are remeshed too (their vertices slide along them), so a pixel
+/// staircase becomes a straighter border within about half a target edge of the input's. The
+/// result has vertices, faces (orientation kept) and normals; uv, colours and texture are
 /// dropped. Throws artisan::Error on an empty or invalid mesh or a target that is not positive.
 TriangleMesh remesh_to_resolution(const TriangleMesh& mesh, double target_edge_m);
 

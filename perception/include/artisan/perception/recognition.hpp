@@ -1,0 +1,100 @@
+#pragma once
+// Object recognition with spin images (Johnson & Hebert, PAMI 1999, section 6): a library of
+// model spin images, compressed by PCA onto the leading eigen-spin-images (Johnson & Hebert,
+// CVPR 1998) and searched in the compressed space; correspondences grouped per model, poses
+// estimated, refined by ICP and verified. Several models and several instances of one model.
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "artisan/core/pose.hpp"
+#include "artisan/core/triangle_mesh.hpp"
+#include "artisan/perception/spin_image.hpp"
+
+namespace artisan {
+
+struct ModelLibraryParams {
+  double resolution_m = 0.003;  ///< [m] models and scenes are resampled to this before spin images
+  SpinImageParams spin;
+  double pca_variance = 0.95;   ///< [1] share of the spin-image variance the compressed space keeps
+};
+
+class SpinImageLibrary {
+ public:
+  explicit SpinImageLibrary(const ModelLibraryParams& params = {});
+
+  /// Adds a model (its mesh in the model frame). Only the new model's spin images are computed;
+  /// the compression is redone on the next compress() or recognition.
+  void add_model(const std::string& name, const TriangleMesh& mesh);
+  /// PCA of every model's spin images; a no-op when nothing changed since the last call.
+  void compress();
+
+  const ModelLibraryParams& params() const { return params_; }
+  size_t model_count() const { return models_.size(); }
+  const std::string& model_name(size_t m) const { return models_[m].name; }
+  const PointCloud& model_points(size_t m) const { return models_[m].points; }
+  int components() const { return static_cast<int>(basis_.cols()); }  ///< eigen-spin-images kept
+  size_t bins() const { return static_cast<size_t>(params_.spin.image_width * params_.spin.image_width); }
+
+  /// Normalised spin images (zero mean, unit norm) of model m, one column per point.
+  const Eigen::MatrixXf& model_images(size_t m) const { return models_[m].images; }
+  /// The same, projected on the eigen-spin-images (components x points).
+  const Eigen::MatrixXf& model_coefficients(size_t m) const { return models_[m].coefficients; }
+  /// Projects normalised spin images (bins x n) into the compressed space (components x n).
+  Eigen::MatrixXf project(const Eigen::MatrixXf& images) const;
+  bool compressed() const { return compressed_; }
+
+ private:
+  struct Model {
+    std::string name;
+    PointCloud points;
+    Eigen::MatrixXf images;
+    Eigen::MatrixXf coefficients;
+  };
+  ModelLibraryParams params_;
+  std::vector<Model> models_;
+  Eigen::VectorXf mean_;
+  Eigen::MatrixXf basis_;  ///< bins x components
+  bool compressed_ = false;
+};
+
+/// Spin images normalised so that a dot product is their correlation coefficient.
+Eigen::MatrixXf normalised_spin_images(const SpinImageStack& stack);
+
+struct RecognitionParams {
+  double scene_point_fraction = 0.25;  ///< [1] share of the scene's resampled points whose spin images are matched
+  int neighbours = 3;                  ///< [1] library matches kept per scene point (nearest in the search space)
+  bool compressed_search = true;       ///< search the PCA space (false: the full spin images)
+  double min_correlation = 0.6;        ///< [1] matches below this estimated correlation are dropped
+  double geometric_consistency = 0.25; ///< [1] T_gc
+  double gamma_factor = 4.0;           ///< [1] grouping gamma, in resolutions
+  int max_groups = 30;                 ///< [1] per model and instance search
+  double min_model_overlap = 0.15;     ///< [1] share of the model's points that must lie on the scene
+  double max_rmse_factor = 0.5;        ///< [1] largest accepted residual, in resolutions
+  int max_instances = 5;               ///< [1] per model
+  double ambiguity_margin = 0.05;      ///< [1] a different pose within this overlap of the best is an ambiguity
+};
+
+struct RecognizedInstance {
+  std::string model;
+  size_t model_index = 0;
+  Transform T_scene_model = Transform::Identity();
+  double overlap_fraction = 0.0;  ///< [1] share of the model's points on the scene surface
+  double rmse_m = 0.0;            ///< [m]
+  double score = 0.0;             ///< [1] overlap - residual penalty; higher is better
+  size_t correspondences = 0;     ///< in the winning group
+  bool ambiguous = false;         ///< another pose explains the scene almost as well (symmetry)
+  Transform T_scene_model_alternative = Transform::Identity();  ///< that pose, when ambiguous
+};
+
+struct RecognitionResult {
+  std::vector<RecognizedInstance> instances;
+  size_t scene_points = 0;
+  double seconds_spin_images = 0.0, seconds_search = 0.0, seconds_verify = 0.0;
+};
+
+/// Finds every instance of the library's models in `scene`. A scene with none gives none.
+RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library, const RecognitionParams& params = {});
+
+}  // namespace artisan
