@@ -6,6 +6,7 @@
 #include "artisan/core/error.hpp"
 #include "artisan/worldmodel/multimesh.hpp"
 #include "artisan/worldmodel/operations.hpp"
+#include "artisan/worldmodel/recognition_store.hpp"
 #include "artisan/worldmodel/workspace.hpp"
 #include "commands.hpp"
 
@@ -153,6 +154,39 @@ void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& 
           std::cerr << "; matched " << r.registered_members << " members, loop closed (rms " << r.loop_closure["rms_rotation_deg_before"].get<double>()
                     << " -> " << r.loop_closure["rms_rotation_deg_after"].get<double>() << " deg)";
         std::cerr << "\n";
+      }
+      return 0;
+    };
+  });
+
+  static std::string rec_mesh;
+  static std::vector<std::string> rec_models;
+  auto* rec = app.add_subcommand("recognize", "Find known models in a mesh; each instance becomes a recognized_model object");
+  rec->add_option("mesh", rec_mesh, "Scene mesh ID or path")->required();
+  rec->add_option("--models", rec_models, "Model IDs or paths (comma-separated; default: every model, as --all)")->delimiter(',');
+  static bool rec_all = false;
+  rec->add_flag("--all", rec_all, "Every model in the workspace (the default)");
+  rec->callback([&options, &action] {
+    action = [&options] {
+      auto ws = Workspace::open(options.db);
+      const auto scene = ws.resolve(rec_mesh);
+      std::vector<worldmodel::ObjectId> models;
+      if (rec_all && !rec_models.empty()) throw Error("give --models or --all, not both");
+      for (const auto& name : rec_models) models.push_back(ws.resolve(name).id);
+      const auto found = worldmodel::recognize_models(ws, scene.id, models);
+      json list = json::array();
+      for (const auto& f : found)
+        list.push_back({{"id", f.id}, {"path", ws.get(f.id).path}, {"model", f.model}, {"T_scene_model", to_row_major(f.T_scene_model)},
+                        {"score", f.figures["score"]}, {"overlap", f.figures["overlap"]}, {"rmse_m", f.figures["rmse_m"]},
+                        {"ambiguous", f.figures["ambiguous"]}});
+      if (options.json) {
+        std::cout << json{{"scene", scene.path}, {"instances", list}}.dump(2) << "\n";
+      } else if (!options.quiet) {
+        if (found.empty()) std::cerr << "no model found in " << scene.path << "\n";
+        for (const auto& f : list)
+          std::cerr << "found " << f["model"].get<std::string>() << " in " << scene.path << ": " << f["path"].get<std::string>() << ", overlap "
+                    << f["overlap"].get<double>() << ", residual " << f["rmse_m"].get<double>() * 1e3 << " mm"
+                    << (f["ambiguous"].get<bool>() ? " (ambiguous: another pose fits almost as well)" : "") << "\n";
       }
       return 0;
     };

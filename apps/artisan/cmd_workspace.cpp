@@ -40,6 +40,13 @@ std::string summary(const Workspace& ws, const ObjectInfo& o) {
       std::snprintf(buf, sizeof buf, "%s%s%d vertices, %d triangles, resolution %.2f mm", o.subkind.c_str(), o.subkind.empty() ? "" : ", ",
                     m.value("vertices", 0), m.value("faces", 0), m.value("resolution_m", 0.0) * 1e3);
       return buf;
+    case ObjectKind::kMultiMesh: return std::to_string(ws.members(o.id).size()) + " members";
+    case ObjectKind::kRecognizedModel:
+      std::snprintf(buf, sizeof buf, "%s, overlap %.2f, residual %.2f mm%s", m.value("model", std::string("?")).c_str(),
+                    m.contains("figures") ? m["figures"].value("overlap", 0.0) : 0.0,
+                    m.contains("figures") ? m["figures"].value("rmse_m", 0.0) * 1e3 : 0.0,
+                    m.contains("figures") && m["figures"].value("ambiguous", false) ? ", ambiguous" : "");
+      return buf;
     default: return o.subkind;
   }
 }
