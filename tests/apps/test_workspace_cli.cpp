@@ -12,6 +12,8 @@
 #include <random>
 #include <thread>
 
+#include <nlohmann/json.hpp>
+
 #include "artisan/core/io/blob_container.hpp"
 #include "artisan/worldmodel/database.hpp"
 #include "test_support.hpp"
@@ -141,6 +143,42 @@ TEST_F(WorkspaceCli, BadInputExitsOneAndLeavesTheWorkspaceUnchanged) {
   const auto r = run_command(kCli + " --db " + q(dir_ / "none.db") + " ls");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("does not exist"), std::string::npos) << r.err;
+}
+
+TEST_F(WorkspaceCli, MeshRegisterRecognizeAndReprocessFromTheCommandLine) {
+  // Method: the pipeline's commands on two real scans: mesh both, register them into a
+  // multimesh (bun045's pose relative to bun000 must match bun.conf's translation), recognize the
+  // bunny model in bun045 with its grasp, and reprocess a mesh with one parameter changed.
+  ASSERT_EQ(run("mkdir /b").exit_code, 0);
+  ASSERT_EQ(run("import --folder /b " + q(test::bunny_dir() / "bun000.ply") + " " + q(test::bunny_dir() / "bun045.ply")).exit_code, 0);
+  auto r = run("--json mesh /b/bun000");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const std::string field : {"\"faces\"", "\"vertices\"", "\"resolution_m\"", "\"min_angle_image_deg\"", "\"id\""})
+    EXPECT_NE(r.out.find(field), std::string::npos) << field << r.out;
+  ASSERT_EQ(run("mesh /b/bun045 --min-angle 20").exit_code, 0);
+  ASSERT_EQ(run("multimesh new views --folder /b").exit_code, 0);
+  ASSERT_EQ(run("multimesh add /b/views /b/bun000-mesh").exit_code, 0);
+  r = run("--json multimesh add /b/views /b/bun045-mesh");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = run("--json multimesh show /b/views");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto members = nlohmann::json::parse(r.out)["members"];
+  ASSERT_EQ(members.size(), 2u);
+  const auto& T = members[1]["T_root_member"];
+  EXPECT_NEAR(T[3].get<double>(), -0.0520211, 0.002);   // bun.conf: bun045 at (-0.0520, -0.0004, -0.0109)
+  EXPECT_NEAR(T[7].get<double>(), -0.000384, 0.002);
+  EXPECT_NEAR(T[11].get<double>(), -0.0109223, 0.002);
+  ASSERT_EQ(run("import --as model --name bunny --grasp '0 0 0.1 0 0 0 1' " + q(test::bunny_dir() / "reconstruction" / "bun_zipper.ply")).exit_code, 0);
+  r = run("--json recognize /b/bun045-mesh --models /bunny");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto instances = nlohmann::json::parse(r.out)["instances"];
+  ASSERT_EQ(instances.size(), 1u) << r.out;
+  r = run("--json show " + instances[0]["path"].get<std::string>());
+  EXPECT_NE(r.out.find("T_scene_grasps"), std::string::npos) << r.out;
+  r = run("--json reprocess /b/bun000-mesh --set thinning_tolerance=0");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("\"version\": 2"), std::string::npos) << r.out;
+  EXPECT_EQ(run("check").exit_code, 0);
 }
 
 pid_t spawn(const std::vector<std::string>& args) {
