@@ -3,6 +3,8 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cstring>
 #include <fstream>
@@ -11,6 +13,12 @@
 #include "artisan/core/error.hpp"
 
 namespace artisan::io {
+
+std::string lower_extension(const std::filesystem::path& path) {
+  auto ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext;
+}
 
 std::vector<uint8_t> read_file_bytes(const std::filesystem::path& path) {
   std::error_code ec;

@@ -15,12 +15,6 @@ namespace artisan::io {
 
 namespace {
 
-std::string lower_extension(const std::filesystem::path& path) {
-  auto ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  return ext;
-}
-
 std::optional<FileFormat> format_from_extension(const std::string& ext) {
   if (ext == ".ply") return FileFormat::kPly;
   if (ext == ".pcd") return FileFormat::kPcd;

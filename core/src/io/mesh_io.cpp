@@ -19,12 +19,6 @@ namespace artisan::io {
 
 namespace {
 
-std::string lower_extension(const std::filesystem::path& path) {
-  auto ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  return ext;
-}
-
 void collect(const aiScene& scene, const aiNode& node, const aiMatrix4x4& parent, TriangleMesh& out,
              const std::filesystem::path& path) {
   const aiMatrix4x4 T = parent * node.mTransformation;

@@ -3,9 +3,13 @@
 #include <cstdint>
 #include <filesystem>
 #include <span>
+#include <string>
 #include <vector>
 
 namespace artisan::io {
+
+/// The file's extension in lower case, with its dot (".ply"); empty when there is none.
+std::string lower_extension(const std::filesystem::path& path);
 
 /// The whole file; throws artisan::FileError when it cannot be read.
 std::vector<uint8_t> read_file_bytes(const std::filesystem::path& path);
