@@ -2,7 +2,9 @@
 // synthetic 640 x 480 pinhole scene. JSON on stdout: per image the time (best of 3, one thread),
 // triangles against the full-resolution grid mesh, coverage of the measured points within
 // 0.5 mm (point-to-triangle), smallest and 5th-percentile angles in the image plane and in 3-D,
-// and the share of triangles under 10 degrees in 3-D.
+// and the share of triangles under 10 degrees in 3-D. Beside it, on the same images: PCL's
+// OrganizedFastMesh at pixel steps 1 and 3; and a 640 x 480 range image from the simulated
+// Pioneer stereo head (real SGBM errors) of the sample pipework cell.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -11,7 +13,13 @@
 
 #include <nlohmann/json.hpp>
 
+#include <pcl/conversions.h>
+#include <pcl/point_types.h>
+#include <pcl/surface/organized_fast_mesh.h>
+
 #include "artisan/core/io/ply.hpp"
+#include "artisan/sim/simulator.hpp"
+#include "artisan/sim/workcell.hpp"
 #include "artisan/perception/meshing.hpp"
 #include "perception/mesh_metrics.hpp"
 #include "perception/synthetic_range.hpp"
@@ -29,14 +37,7 @@ double percentile(std::vector<double> v, double q) {
   return *it;
 }
 
-nlohmann::json measure(const std::string& name, const RangeImage& image, const MeshingParams& params) {
-  MeshingResult result;
-  double best_s = 1e9;
-  for (int run = 0; run < 3; ++run) {
-    const auto t0 = std::chrono::steady_clock::now();
-    result = artisan::mesh_range_image(image, params);
-    best_s = std::min(best_s, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-  }
+nlohmann::json metrics(const std::string& name, const RangeImage& image, const MeshingResult& result, double best_s) {
   const auto& mesh = result.mesh;
   std::vector<double> angles_image, angles_3d;
   size_t slivers = 0;
@@ -82,6 +83,63 @@ nlohmann::json measure(const std::string& name, const RangeImage& image, const M
   };
 }
 
+nlohmann::json measure(const std::string& name, const RangeImage& image, const MeshingParams& params) {
+  MeshingResult result;
+  double best_s = 1e9;
+  for (int run = 0; run < 3; ++run) {
+    const auto t0 = std::chrono::steady_clock::now();
+    result = artisan::mesh_range_image(image, params);
+    best_s = std::min(best_s, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  }
+  return metrics(name, image, result, best_s);
+}
+
+// PCL's OrganizedFastMesh on the same organized points (NaN where there is no data).
+nlohmann::json measure_pcl(const std::string& name, const RangeImage& image, int pixel_step) {
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>(image.width, image.height));
+  for (size_t i = 0; i < image.pixel_count(); ++i) {
+    const auto& p = image.points_sensor[i];
+    (*cloud)[i] = image.valid[i] ? pcl::PointXYZ(p.x(), p.y(), p.z()) : pcl::PointXYZ(NAN, NAN, NAN);
+  }
+  cloud->is_dense = false;
+  std::vector<pcl::Vertices> polygons;
+  double best_s = 1e9;
+  for (int run = 0; run < 3; ++run) {
+    pcl::OrganizedFastMesh<pcl::PointXYZ> ofm;
+    ofm.setInputCloud(cloud);
+    ofm.setTrianglePixelSize(pixel_step);
+    ofm.setTriangulationType(pcl::OrganizedFastMesh<pcl::PointXYZ>::TRIANGLE_ADAPTIVE_CUT);
+    polygons.clear();
+    const auto t0 = std::chrono::steady_clock::now();
+    ofm.reconstruct(polygons);
+    best_s = std::min(best_s, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  }
+  // The output indexes the organized cloud: vertex i is pixel (i % width, i / width).
+  MeshingResult result;
+  std::vector<int> remap(image.pixel_count(), -1);
+  for (const auto& poly : polygons) {
+    if (poly.vertices.size() != 3) continue;
+    Eigen::Vector3i f;
+    for (int k = 0; k < 3; ++k) {
+      const auto i = poly.vertices[k];
+      if (remap[i] < 0) {
+        remap[i] = static_cast<int>(result.mesh.vertices.size());
+        result.mesh.vertices.push_back(image.points_sensor[i]);
+        result.vertex_pixels.emplace_back(double(i % image.width), double(i / image.width));
+      }
+      f[k] = remap[i];
+    }
+    result.mesh.faces.push_back(f);
+  }
+  result.resolution_m = result.mesh.median_edge_length();
+  auto j = metrics(name, image, result, best_s);
+  j["method"] = "pcl::OrganizedFastMesh TRIANGLE_ADAPTIVE_CUT, pixel step " + std::to_string(pixel_step);
+  for (const char* k : {"steiner_vertices", "full_grid_triangles", "triangle_share_of_full_grid", "discontinuity_edges", "constraint_edges",
+                        "faces_below_min_angle", "min_angle_image_deg"})
+    j.erase(k);
+  return j;
+}
+
 }  // namespace
 
 int main() {
@@ -100,6 +158,7 @@ int main() {
     const RangeImage image = artisan::io::ply_to_range_image(artisan::io::read_ply(path), path);
     out["images"].push_back(measure(scan, image, params));
     std::fprintf(stderr, "%s\n", out["images"].back().dump().c_str());
+    for (int step : {1, 3}) out["pcl_organized_fast_mesh"].push_back(measure_pcl(scan, image, step));
   }
   // A 640 x 480 pinhole view of a tilted wall, a floor, and two spheres in front.
   artisan::test::AnalyticScene scene;
@@ -110,6 +169,18 @@ int main() {
   const RangeImage vga = artisan::test::render_range_image(artisan::test::vga_camera(), scene);
   out["images"].push_back(measure("synthetic_vga_spheres_wall_floor", vga, params));
   std::fprintf(stderr, "%s\n", out["images"].back().dump().c_str());
+  for (int step : {1, 3}) out["pcl_organized_fast_mesh"].push_back(measure_pcl("synthetic_vga_spheres_wall_floor", vga, step));
+  // A 640 x 480 range image from the simulated Pioneer trinocular stereo head (SGBM).
+  artisan::sim::Simulator simulator(artisan::sim::load_workcell(std::string(ARTISAN_DATA_DIR) + "/workcells/pipework.json"));
+  artisan::sim::ScanRequest request;
+  request.sensor = "pioneer";
+  const RangeImage stereo = simulator.scan(request).range;
+  out["images"].push_back(measure("simulated_pioneer_stereo_640x480", stereo, params));
+  std::fprintf(stderr, "%s\n", out["images"].back().dump().c_str());
+  MeshingParams stereo_params = params;
+  stereo_params.thinning_noise_per_m2 = 0.005;
+  out["images"].push_back(measure("simulated_pioneer_stereo_640x480_noise_floor_0.005", stereo, stereo_params));
+  for (int step : {1, 3}) out["pcl_organized_fast_mesh"].push_back(measure_pcl("simulated_pioneer_stereo_640x480", stereo, step));
   std::printf("%s\n", out.dump(2).c_str());
   return 0;
 }

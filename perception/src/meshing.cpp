@@ -213,7 +213,7 @@ class RangeSurface {
   }
 
   // Least-squares plane test of the (sx+1) x (sy+1) pixels of a block at (bx, by); all valid.
-  bool planar(int bx, int by, int sx, int sy, double tolerance) const {
+  bool planar(int bx, int by, int sx, int sy, double tolerance, double noise_per_m2) const {
     const int n = (sx + 1) * (sy + 1);
     const Eigen::Vector3d origin = point(image_.index(bx, by)).cast<double>();
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
@@ -233,8 +233,9 @@ class RangeSurface {
     // Sample spacing: the lateral length of the block's sides per pixel, the smaller of the two.
     const double spacing = std::min(lateral(origin, point(image_.index(bx + sx, by)).cast<double>()) / sx,
                                     lateral(origin, point(image_.index(bx, by + sy)).cast<double>()) / sy);
-    const double limit = tolerance * spacing;
     const Eigen::Vector3d centre = origin + mean;
+    // Noisy sensors (stereo): never demand more flatness than the noise allows.
+    const double limit = std::max(tolerance * spacing, noise_per_m2 * centre.squaredNorm());
     for (int y = by; y <= by + sy; ++y)
       for (int x = bx; x <= bx + sx; ++x)
         if (std::abs(normal.dot(point(image_.index(x, y)).cast<double>() - centre)) > limit) return false;
@@ -416,6 +417,8 @@ void check_params(const RangeImage& image, const MeshingParams& params) {
     throw Error("mesh_range_image: min_angle_3d_deg " + num(params.min_angle_3d_deg) + " is outside [0, 60)");
   if (!(params.max_edge_length_m > 0))
     throw Error("mesh_range_image: max_edge_length_m " + num(params.max_edge_length_m) + " is not positive");
+  if (!(params.thinning_noise_per_m2 >= 0) || !std::isfinite(params.thinning_noise_per_m2))
+    throw Error("mesh_range_image: thinning_noise_per_m2 " + num(params.thinning_noise_per_m2) + " must be finite and >= 0");
   if (!(params.thinning_tolerance >= 0) || !std::isfinite(params.thinning_tolerance))
     throw Error("mesh_range_image: thinning_tolerance " + num(params.thinning_tolerance) +
                 " is not a non-negative finite number");
@@ -519,7 +522,7 @@ void flip_for_3d_shape(const std::vector<Eigen::Vector2d>& pixels, const std::ve
 
 // Quadtree thinning (see the file comment): the pixels to keep. Blocks are aligned to multiples
 // of their size; leaf_size holds, per cell, the size of the leaf that contains it.
-std::vector<uint8_t> thin(const RangeSurface& surface, double tolerance) {
+std::vector<uint8_t> thin(const RangeSurface& surface, double tolerance, double noise_per_m2) {
   const int cw = surface.cells_x(), ch = surface.cells_y(), w = surface.width();
   // Integral image of full cells, to test "every cell of the block is full" in O(1).
   std::vector<int> full((cw + 1) * static_cast<size_t>(ch + 1), 0);
@@ -559,7 +562,7 @@ std::vector<uint8_t> thin(const RangeSurface& surface, double tolerance) {
     stack.pop_back();
     if (b.x >= cw || b.y >= ch) continue;
     if (2 * b.sx(cw) >= b.s && 2 * b.sy(ch) >= b.s && all_full(b) &&
-        surface.planar(b.x, b.y, b.sx(cw), b.sy(ch), tolerance)) {
+        surface.planar(b.x, b.y, b.sx(cw), b.sy(ch), tolerance, noise_per_m2)) {
       leaves.push_back(b);
       set_size(b, b.s);
     } else if (b.s > 2) {
@@ -670,7 +673,7 @@ MeshingResult mesh_range_image(const RangeImage& image, const MeshingParams& par
   // Pixels to triangulate: the quadtree's choice and the boundary's. A boundary pixel inside a
   // straight run of sides is left out when the quadtree does not need it (it lies on the side of a
   // coarse, planar block): the run becomes one constraint, which the refinement splits as needed.
-  std::vector<uint8_t> keep = thin(surface, params.thinning_tolerance);
+  std::vector<uint8_t> keep = thin(surface, params.thinning_tolerance, params.thinning_noise_per_m2);
   for (const auto& [a, b] : diagonals) degree[a] = degree[b] = 4;  // never inside a straight run
   auto inner = [&](size_t i, const std::vector<uint8_t>& side, size_t step) {
     return !keep[i] && degree[i] == 2 && side[i] && i >= step && side[i - step];

@@ -30,6 +30,7 @@ json meshing_to_json(const MeshingParams& p) {
           {"min_angle_deg", p.min_angle_deg},
           {"max_edge_length_m", p.max_edge_length_m},
           {"thinning_tolerance", p.thinning_tolerance},
+          {"thinning_noise_per_m2", p.thinning_noise_per_m2},
           {"roi_pixels", roi}};
 }
 
@@ -47,6 +48,7 @@ MeshingParams meshing_from_json(const json& j) {
   p.min_angle_deg = j.at("min_angle_deg").get<double>();
   p.max_edge_length_m = j.at("max_edge_length_m").get<double>();
   p.thinning_tolerance = j.at("thinning_tolerance").get<double>();
+  p.thinning_noise_per_m2 = j.at("thinning_noise_per_m2").get<double>();
   const auto& roi = j.at("roi_pixels");
   if (!roi.is_null()) {
     if (!roi.is_array() || roi.size() != 4) throw Error("mesh: roi_pixels must be [x_min, y_min, x_max, y_max] or null");

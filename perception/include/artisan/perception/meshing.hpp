@@ -55,6 +55,10 @@ struct MeshingParams {
   /// when every point in it lies within tolerance * spacing of the block's least-squares plane,
   /// so the mesh stays within about twice that of the measured points. 0 keeps every pixel.
   double thinning_tolerance = 0.5;
+  /// [1/m] thinning floor for noisy sensors: the flatness limit is at least this times the
+  /// squared distance from the sensor origin (triangulation noise grows with range squared;
+  /// for the simulated Pioneer stereo head ~0.005, three times its noise). 0: off.
+  double thinning_noise_per_m2 = 0.0;
   /// [pixels] region of interest, inclusive min and max (x, y) corners; unset: the whole image.
   std::optional<Eigen::AlignedBox2i> roi_pixels;
 };
