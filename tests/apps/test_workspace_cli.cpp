@@ -219,7 +219,8 @@ TEST_F(WorkspaceCli, KilledImportsLeaveNoPartialObject) {
     const std::string folder = "/k" + std::to_string(i);
     ASSERT_EQ(run("mkdir " + folder).exit_code, 0);
     const pid_t pid = spawn(import_args(db_, folder));
-    std::this_thread::sleep_for(std::chrono::milliseconds(std::uniform_int_distribution<int>(0, 900)(rng)));
+    // A sweep from 0 to ~0.9 s with jitter: the first kills land before the commit on any machine.
+    std::this_thread::sleep_for(std::chrono::milliseconds(75 * i + std::uniform_int_distribution<int>(0, 40)(rng)));
     kill(pid, SIGKILL);
     int status = 0;
     waitpid(pid, &status, 0);
