@@ -22,11 +22,11 @@ std::vector<uint8_t> encode_mesh(const TriangleMesh& mesh, bool compress) {
   w.put<uint8_t>(!mesh.normals.empty());
   w.put<uint8_t>(!mesh.uv.empty());
   w.put<uint8_t>(!mesh.colors.empty());
-  w.put_array(mesh.vertices.data()->data(), mesh.vertices.size() * 3);
-  if (!mesh.normals.empty()) w.put_array(mesh.normals.data()->data(), mesh.normals.size() * 3);
-  if (!mesh.uv.empty()) w.put_array(mesh.uv.data()->data(), mesh.uv.size() * 2);
-  if (!mesh.colors.empty()) w.put_array(mesh.colors.data()->data(), mesh.colors.size() * 3);
-  w.put_array(mesh.faces.data()->data(), mesh.faces.size() * 3);
+  w.put_array(reinterpret_cast<const float*>(mesh.vertices.data()), mesh.vertices.size() * 3);
+  if (!mesh.normals.empty()) w.put_array(reinterpret_cast<const float*>(mesh.normals.data()), mesh.normals.size() * 3);
+  if (!mesh.uv.empty()) w.put_array(reinterpret_cast<const float*>(mesh.uv.data()), mesh.uv.size() * 2);
+  if (!mesh.colors.empty()) w.put_array(reinterpret_cast<const uint8_t*>(mesh.colors.data()), mesh.colors.size() * 3);
+  w.put_array(reinterpret_cast<const int*>(mesh.faces.data()), mesh.faces.size() * 3);
   detail::put_image(w, mesh.texture);
   return seal_blob(kMagic, kMeshFormatVersion, w.bytes(), compress);
 }
@@ -43,21 +43,21 @@ TriangleMesh decode_mesh(std::span<const uint8_t> bytes, const std::string& sour
   const bool has_colors = r.get<uint8_t>("has_colors");
   TriangleMesh mesh;
   mesh.vertices.resize(nv);
-  r.get_array(mesh.vertices.data()->data(), nv * 3, "vertices");
+  r.get_array(reinterpret_cast<float*>(mesh.vertices.data()), nv * 3, "vertices");
   if (has_normals) {
     mesh.normals.resize(nv);
-    r.get_array(mesh.normals.data()->data(), nv * 3, "normals");
+    r.get_array(reinterpret_cast<float*>(mesh.normals.data()), nv * 3, "normals");
   }
   if (has_uv) {
     mesh.uv.resize(nv);
-    r.get_array(mesh.uv.data()->data(), nv * 2, "uv");
+    r.get_array(reinterpret_cast<float*>(mesh.uv.data()), nv * 2, "uv");
   }
   if (has_colors) {
     mesh.colors.resize(nv);
-    r.get_array(mesh.colors.data()->data(), nv * 3, "colours");
+    r.get_array(reinterpret_cast<uint8_t*>(mesh.colors.data()), nv * 3, "colours");
   }
   mesh.faces.resize(nf);
-  r.get_array(mesh.faces.data()->data(), nf * 3, "faces");
+  r.get_array(reinterpret_cast<int*>(mesh.faces.data()), nf * 3, "faces");
   mesh.texture = detail::get_image(r);
   if (r.remaining() != 0) r.fail("payload", std::to_string(r.remaining()) + " unexpected bytes at the end");
   try {

@@ -29,6 +29,7 @@ class ByteWriter {
   void put_bytes(std::span<const uint8_t> data) { bytes_.insert(bytes_.end(), data.begin(), data.end()); }
   template <typename T>
   void put_array(const T* data, size_t count) {
+    if (count == 0) return;
     const auto* p = reinterpret_cast<const uint8_t*>(data);
     bytes_.insert(bytes_.end(), p, p + count * sizeof(T));
   }
@@ -61,6 +62,7 @@ class ByteReader {
   }
   template <typename T>
   void get_array(T* out, size_t count, const char* field) {
+    if (count == 0) return;  // out may be null for an empty array
     if (count > remaining() / sizeof(T)) fail(field, "needs " + std::to_string(count * sizeof(T)) + " bytes, " + std::to_string(remaining()) + " left");
     std::memcpy(out, bytes_.data() + pos_, count * sizeof(T));
     pos_ += count * sizeof(T);
