@@ -8,6 +8,7 @@
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/geometry_file.hpp"
 #include "artisan/worldmodel/multimesh.hpp"
+#include "artisan/worldmodel/recognition_store.hpp"
 #include "artisan/worldmodel/workspace.hpp"
 #include "commands.hpp"
 
@@ -338,8 +339,8 @@ void add_workspace_commands(CLI::App& app, const GlobalOptions& options, Action&
               for (const auto& T : grasps) g.push_back(to_row_major(T));
               meta["T_model_grasps"] = g;
             }
-            ids.push_back(ws.add(folder.id, worldmodel::make_mesh_object(model ? ObjectKind::kModel : ObjectKind::kMesh,
-                                                                           model ? "" : "original", item.name, *mesh, prov, meta)));
+            ids.push_back(ws.add(folder.id, model ? worldmodel::make_model_object(item.name, *mesh, prov, meta)
+                                                  : worldmodel::make_mesh_object(ObjectKind::kMesh, "original", item.name, *mesh, prov, meta)));
           } else {
             throw Error(item.file + " holds a point cloud without a grid; only range images and meshes can be imported");
           }

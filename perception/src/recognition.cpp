@@ -51,6 +51,18 @@ void SpinImageLibrary::add_model(const std::string& name, const TriangleMesh& me
   compressed_ = false;
 }
 
+void SpinImageLibrary::add_precomputed_model(const std::string& name, PointCloud points, Eigen::MatrixXf images) {
+  for (const auto& m : models_)
+    if (m.name == name) throw Error("spin-image library: a model named \"" + name + "\" is already in it");
+  if (points.normals.size() != points.points.size() || images.rows() != static_cast<Eigen::Index>(bins()) ||
+      images.cols() != static_cast<Eigen::Index>(points.points.size()))
+    throw Error("spin-image library: precomputed model \"" + name + "\" has " + std::to_string(images.rows()) + " x " +
+                std::to_string(images.cols()) + " spin images for " + std::to_string(points.points.size()) + " points; expected " +
+                std::to_string(bins()) + " rows");
+  models_.push_back({name, std::move(points), std::move(images), {}});
+  compressed_ = false;
+}
+
 void SpinImageLibrary::compress() {
   if (compressed_ || models_.empty()) return;
   const auto bins = static_cast<Eigen::Index>(this->bins());

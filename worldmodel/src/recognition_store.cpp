@@ -4,6 +4,8 @@
 #include <map>
 
 #include "artisan/core/error.hpp"
+#include "artisan/core/io/blob_container.hpp"
+#include "artisan/core/io/bytes.hpp"
 #include "artisan/perception/recognition.hpp"
 
 namespace artisan::worldmodel {
@@ -19,7 +21,60 @@ void collect_models(const Workspace& ws, ObjectId folder, std::vector<ObjectId>&
   }
 }
 
+constexpr io::BlobMagic kSpinMagic = {'A', 'R', 'T', 'I', 'S', 'S', 'P', '\x1a'};
+constexpr uint32_t kSpinVersion = 1;
+constexpr const char* kSpinEncoding = "artisan-spin-images/1";
+
+// Payload: f64 resolution, i32 image width, f64 support angle, u64 n, points, normals (3 f32
+// each), images (width^2 f32 each, normalised).
+std::vector<uint8_t> encode_spin_images(const ModelLibraryParams& params, const PointCloud& points, const Eigen::MatrixXf& images) {
+  io::ByteWriter w;
+  w.put<double>(params.resolution_m);
+  w.put<int32_t>(params.spin.image_width);
+  w.put<double>(params.spin.support_angle_deg);
+  w.put<uint64_t>(points.points.size());
+  w.put_array(reinterpret_cast<const float*>(points.points.data()), points.points.size() * 3);
+  w.put_array(reinterpret_cast<const float*>(points.normals.data()), points.normals.size() * 3);
+  w.put_array(images.data(), static_cast<size_t>(images.size()));
+  return io::seal_blob(kSpinMagic, kSpinVersion, w.bytes(), true);
+}
+
+// The stored stack, or nothing when it was made with other parameters.
+bool decode_spin_images(const SqlBlob& blob, const ModelLibraryParams& params, const std::string& source, PointCloud& points,
+                        Eigen::MatrixXf& images) {
+  const auto raw = io::open_blob(blob, kSpinMagic, kSpinVersion, "spin-image stack", source);
+  io::ByteReader r(raw, source);
+  const double resolution = r.get<double>("resolution");
+  const int width = r.get<int32_t>("image width");
+  const double support = r.get<double>("support angle");
+  if (resolution != params.resolution_m || width != params.spin.image_width || support != params.spin.support_angle_deg) return false;
+  const auto n = r.get<uint64_t>("point count");
+  const size_t bins = static_cast<size_t>(width) * width;
+  if (n > r.remaining() / (24 + 4 * bins)) r.fail("point count", std::to_string(n) + " does not fit the payload");
+  points.points.resize(n);
+  points.normals.resize(n);
+  images.resize(static_cast<Eigen::Index>(bins), static_cast<Eigen::Index>(n));
+  r.get_array(reinterpret_cast<float*>(points.points.data()), n * 3, "points");
+  r.get_array(reinterpret_cast<float*>(points.normals.data()), n * 3, "normals");
+  r.get_array(images.data(), bins * n, "spin images");
+  if (r.remaining() != 0) r.fail("payload", "unexpected bytes at the end");
+  return true;
+}
+
 }  // namespace
+
+NewObject make_model_object(const std::string& name, const TriangleMesh& mesh, const Provenance& provenance, json metadata) {
+  const ModelLibraryParams params;
+  SpinImageLibrary library(params);
+  library.add_model(name, mesh);
+  metadata["spin_images"] = {{"points", library.model_points(0).points.size()},
+                             {"resolution_m", params.resolution_m},
+                             {"image_width", params.spin.image_width},
+                             {"support_angle_deg", params.spin.support_angle_deg}};
+  auto object = make_mesh_object(ObjectKind::kModel, "", name, mesh, provenance, std::move(metadata));
+  object.blobs.push_back({"spin_images", kSpinEncoding, encode_spin_images(params, library.model_points(0), library.model_images(0))});
+  return object;
+}
 
 std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id, std::vector<ObjectId> models) {
   const auto scene = ws.get(scene_id);
@@ -33,7 +88,14 @@ std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id,
   for (ObjectId m : models) {
     const auto info = ws.get(m);
     if (info.kind != ObjectKind::kModel) throw Error(info.path + " is a " + to_string(info.kind) + ", not a model");
-    library.add_model(info.name, ws.load_mesh(m));
+    // The stack stored at import when it matches the library's parameters, else computed now.
+    PointCloud points;
+    Eigen::MatrixXf images;
+    bool stored = false;
+    for (const auto& b : ws.blobs(m))
+      if (b.role == "spin_images") stored = decode_spin_images(b.data, library_params, info.path, points, images);
+    if (stored) library.add_precomputed_model(info.name, std::move(points), std::move(images));
+    else library.add_model(info.name, ws.load_mesh(m));
     model_info.push_back(info);
   }
   const auto result = recognize(ws.load_mesh(scene_id), library, params);

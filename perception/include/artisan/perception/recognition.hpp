@@ -27,6 +27,9 @@ class SpinImageLibrary {
   /// Adds a model (its mesh in the model frame). Only the new model's spin images are computed;
   /// the compression is redone on the next compress() or recognition.
   void add_model(const std::string& name, const TriangleMesh& mesh);
+  /// Adds a model whose resampled points and normalised spin images (bins x points) were
+  /// computed before with the same params (by add_model), e.g. stored with a workspace model.
+  void add_precomputed_model(const std::string& name, PointCloud points, Eigen::MatrixXf images);
   /// PCA of every model's spin images; a no-op when nothing changed since the last call.
   void compress();
 

@@ -14,6 +14,11 @@ struct RecognizedObject {
   nlohmann::json figures;  ///< overlap, rmse_m, score, correspondences, ambiguous
 };
 
+/// A model object: the mesh (as make_mesh_object) plus its spin-image stack at the library
+/// resolution ("spin_images" data), so recognition does not recompute it.
+NewObject make_model_object(const std::string& name, const TriangleMesh& mesh, const Provenance& provenance,
+                            nlohmann::json metadata = nlohmann::json::object());
+
 /// Recognizes `models` (model objects; empty: every model in the workspace) in the mesh `scene`
 /// and stores the instances beside the scene mesh, in one transaction. Returns them (none when
 /// no model is there).
