@@ -6,6 +6,7 @@
 
 #include "artisan/core/pose.hpp"
 #include "artisan/core/triangle_mesh.hpp"
+#include "artisan/perception/icp.hpp"
 
 namespace artisan::detail {
 
@@ -34,6 +35,16 @@ struct GroupingResult {
   std::vector<GroupedTransform> groups;
   size_t consistent_candidates = 0;
 };
+
+/// The short ICP that verifies a candidate pose on clouds resampled at `resolution_m` (section 5.3).
+inline IcpSettings verification_icp(double resolution_m, int iterations) {
+  IcpSettings s;
+  s.max_iterations = iterations;
+  s.max_correspondence_distance_m = 2.0 * resolution_m;
+  s.huber_delta_m = 0.5 * resolution_m;
+  s.max_source_points = 1500;
+  return s;
+}
 
 GroupingResult group_correspondences(const PointCloud& source, const PointCloud& target, std::vector<Correspondence> candidates,
                                      const GroupingParams& params);

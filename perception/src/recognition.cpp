@@ -148,11 +148,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // Per model: group, estimate, verify by ICP; accept instances one at a time, removing the
   // scene points each explains.
   t0 = Clock::now();
-  IcpSettings coarse;
-  coarse.max_iterations = 15;
-  coarse.max_correspondence_distance_m = 2.0 * res;
-  coarse.huber_delta_m = 0.5 * res;
-  coarse.max_source_points = 1500;
+  const IcpSettings coarse = detail::verification_icp(res, 15);
   IcpSettings fine = coarse;
   fine.max_iterations = 40;
   fine.max_correspondence_distance_m = 1.0 * res;

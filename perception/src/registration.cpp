@@ -151,11 +151,7 @@ RegistrationResult register_meshes(const TriangleMesh& target, const TriangleMes
   // Verification (section 5.3): a short ICP from each transform on the resampled clouds; the
   // best overlap wins, then the residual.
   t0 = Clock::now();
-  IcpSettings coarse;
-  coarse.max_iterations = 12;
-  coarse.max_correspondence_distance_m = 2.0 * res;
-  coarse.huber_delta_m = 0.5 * res;
-  coarse.max_source_points = 1500;
+  const IcpSettings coarse = detail::verification_icp(res, 12);
   double best_score = -1;
   Transform best = Transform::Identity();
   for (const auto& c : transforms) {

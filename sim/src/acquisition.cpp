@@ -68,6 +68,8 @@ std::vector<uint16_t> read_png16(const fs::path& path, int& width, int& height) 
   return out;
 }
 
+namespace {
+
 std::vector<ObjectTruth> object_truth(Renderer& renderer, const Workcell& cell, const PinholeCamera& camera,
                                       const Transform& T_world_camera, const std::vector<uint16_t>& instance_ids,
                                       double near_m, double far_m) {
@@ -94,6 +96,22 @@ std::vector<ObjectTruth> object_truth(Renderer& renderer, const Workcell& cell, 
     out.push_back(std::move(o));
   }
   return out;
+}
+
+}  // namespace
+
+GroundTruth view_truth(Renderer& renderer, const Workcell& cell, const std::string& sensor_kind, uint64_t seed,
+                       const PinholeCamera& camera, const Transform& T_world_sensor, std::vector<uint16_t> instance_ids,
+                       std::vector<float> depth_m, double near_m, double far_m) {
+  GroundTruth t;
+  t.sensor_kind = sensor_kind;
+  t.seed = seed;
+  t.T_world_sensor = T_world_sensor;
+  t.camera = camera;
+  t.objects = object_truth(renderer, cell, camera, T_world_sensor, instance_ids, near_m, far_m);
+  t.instance_ids = std::move(instance_ids);
+  t.depth_m = std::move(depth_m);
+  return t;
 }
 
 void write_acquisition(const Acquisition& a, const fs::path& dir) {

@@ -131,14 +131,7 @@ Acquisition scan_pioneer(Renderer& renderer, const Workcell& cell, const Transfo
   add_image("right", right.color, T_sensor_right);
   add_image("top", top.color, T_sensor_top);
 
-  GroundTruth& t = acq.truth;
-  t.sensor_kind = r.sensor.kind;
-  t.seed = seed;
-  t.T_world_sensor = T_world_sensor;
-  t.camera = cam;
-  t.instance_ids = left.instance_ids;
-  t.depth_m = left.depth_m;
-  t.objects = object_truth(renderer, cell, cam, T_world_sensor, left.instance_ids, near_m, far_m);
+  acq.truth = view_truth(renderer, cell, r.sensor.kind, seed, cam, T_world_sensor, left.instance_ids, left.depth_m, near_m, far_m);
   return acq;
 }
 

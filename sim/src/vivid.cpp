@@ -162,14 +162,7 @@ Acquisition scan_vivid(Renderer& renderer, const Workcell& cell, const Transform
   cam.camera = color_cam;
   r.images.push_back(std::move(cam));
 
-  GroundTruth& t = acq.truth;
-  t.sensor_kind = r.sensor.kind;
-  t.seed = seed;
-  t.T_world_sensor = T_world_sensor;
-  t.camera = range_cam;
-  t.instance_ids = truth.instance_ids;
-  t.depth_m = truth.depth_m;
-  t.objects = object_truth(renderer, cell, range_cam, T_world_sensor, truth.instance_ids, near_m, far_m);
+  acq.truth = view_truth(renderer, cell, r.sensor.kind, seed, range_cam, T_world_sensor, truth.instance_ids, truth.depth_m, near_m, far_m);
   return acq;
 }
 

@@ -63,10 +63,12 @@ void write_png16(int width, int height, const std::vector<uint16_t>& pixels, con
 /// Reads a 16-bit grey PNG (e.g. instances.png). Throws artisan::FileError.
 std::vector<uint16_t> read_png16(const std::filesystem::path& path, int& width, int& height);
 
-/// Per-instance visible fractions: renders each body alone (instance pass only) from the view.
+/// The ground truth of one view: the sensor's kind, seed, pose and pixel grid, the noise-free
+/// instance ids and depth, and every body's pose and visible fraction (each body rendered alone,
+/// instance pass only, from the same view). Name, time, joints and environment are the caller's.
 class Renderer;
-std::vector<ObjectTruth> object_truth(Renderer& renderer, const Workcell& cell, const PinholeCamera& camera,
-                                      const Transform& T_world_camera, const std::vector<uint16_t>& instance_ids,
-                                      double near_m, double far_m);
+GroundTruth view_truth(Renderer& renderer, const Workcell& cell, const std::string& sensor_kind, uint64_t seed,
+                       const PinholeCamera& camera, const Transform& T_world_sensor, std::vector<uint16_t> instance_ids,
+                       std::vector<float> depth_m, double near_m, double far_m);
 
 }  // namespace artisan::sim
