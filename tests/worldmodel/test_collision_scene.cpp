@@ -1,0 +1,193 @@
+// Collision scene: analytic cases (sphere/plane, box/box, rays) and brute force on a real mesh.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "artisan/core/error.hpp"
+#include "artisan/core/io/mesh_io.hpp"
+#include "artisan/worldmodel/collision_scene.hpp"
+#include "test_support.hpp"
+
+namespace artisan::worldmodel {
+namespace {
+
+// A square in the z = 0 plane, `half` on each side of the origin, facing +z.
+std::shared_ptr<TriangleMesh> plane(float half) {
+  auto m = std::make_shared<TriangleMesh>();
+  m->vertices = {{-half, -half, 0}, {half, -half, 0}, {half, half, 0}, {-half, half, 0}};
+  m->faces = {{0, 1, 2}, {0, 2, 3}};
+  return m;
+}
+
+// An axis-aligned box mesh of full size `s` centred at the origin.
+std::shared_ptr<TriangleMesh> box_mesh(const Eigen::Vector3f& s) {
+  auto m = std::make_shared<TriangleMesh>();
+  for (int i = 0; i < 8; ++i)
+    m->vertices.emplace_back((i & 1 ? 0.5f : -0.5f) * s.x(), (i & 2 ? 0.5f : -0.5f) * s.y(), (i & 4 ? 0.5f : -0.5f) * s.z());
+  m->faces = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+              {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+  return m;
+}
+
+QueryShape sphere_at(const Eigen::Vector3d& c, double r, const std::string& name = "sphere") {
+  QueryShape s;
+  s.name = name;
+  s.kind = QueryShape::Kind::sphere;
+  s.radius_m = r;
+  s.T_world_shape = Transform(Eigen::Translation3d(c));
+  return s;
+}
+
+QueryShape box_at(const Transform& T, const Eigen::Vector3d& size, const std::string& name = "box") {
+  QueryShape s;
+  s.name = name;
+  s.kind = QueryShape::Kind::box;
+  s.size = size;
+  s.T_world_shape = T;
+  return s;
+}
+
+TEST(CollisionScene, SphereAgainstPlane) {
+  CollisionScene scene;
+  scene.set_body(7, plane(1.0f), Transform::Identity());
+  for (double h : {0.5, 0.2, 0.11, 0.09, 0.0, -0.05}) {
+    const auto c = scene.check({sphere_at({0.1, -0.2, h}, 0.1)});
+    EXPECT_EQ(c.in_collision, h <= 0.1) << h;
+    if (c.in_collision) {
+      ASSERT_EQ(c.contacts.size(), 1u);
+      EXPECT_EQ(c.contacts[0].body, 7);
+      EXPECT_NEAR(c.contacts[0].distance_m, std::abs(h) - 0.1, 1e-4) << h;
+    }
+  }
+  const auto d = scene.distance({sphere_at({0.3, 0.3, 0.25}, 0.1)}, 1.0);
+  ASSERT_TRUE(d.closest);
+  EXPECT_NEAR(d.distance_m, 0.15, 1e-4);
+  EXPECT_NEAR(d.closest->point_on_body.z(), 0.0, 1e-4);
+  EXPECT_NEAR(d.closest->point_on_body.x(), 0.3, 1e-4);
+  EXPECT_NEAR(d.closest->point_on_shape.z(), 0.15, 1e-4);
+  // Nothing within reach: the reach itself, no witness.
+  const auto far = scene.distance({sphere_at({0, 0, 2.0}, 0.1)}, 0.5);
+  EXPECT_FALSE(far.closest);
+  EXPECT_EQ(far.distance_m, 0.5);
+}
+
+TEST(CollisionScene, BoxAgainstBoxWithMarginAndRotation) {
+  CollisionScene scene;
+  scene.set_body(1, box_mesh({0.2f, 0.2f, 0.2f}), Transform(Eigen::Translation3d(1, 0, 0)), 0.01);
+  // Face to face, 5 cm apart: distance 0.05 less the 1 cm margin.
+  const Transform T(Eigen::Translation3d(1 - 0.1 - 0.05 - 0.05, 0, 0));
+  const auto d = scene.distance({box_at(T, {0.1, 0.1, 0.1})}, 1.0);
+  EXPECT_NEAR(d.distance_m, 0.04, 2e-4);
+  EXPECT_FALSE(scene.check({box_at(T, {0.1, 0.1, 0.1})}).in_collision);
+  // 5 mm apart: inside the margin, so in collision.
+  const Transform near(Eigen::Translation3d(1 - 0.1 - 0.005 - 0.05, 0, 0));
+  EXPECT_TRUE(scene.check({box_at(near, {0.1, 0.1, 0.1})}).in_collision);
+  // A box turned 45° about z presents its edge: half diagonal 0.0707.
+  Transform R = Transform(Eigen::Translation3d(1 - 0.1 - 0.1, 0, 0)) * Eigen::AngleAxisd(M_PI / 4, Eigen::Vector3d::UnitZ());
+  EXPECT_NEAR(scene.distance({box_at(R, {0.1, 0.1, 0.1})}, 1.0).distance_m, 0.1 - 0.05 * std::sqrt(2.0) - 0.01, 3e-4);
+}
+
+TEST(CollisionScene, AllowedPairsAndRemoval) {
+  CollisionScene scene;
+  scene.set_body(1, plane(1.0f), Transform::Identity());
+  scene.set_body(2, box_mesh({0.1f, 0.1f, 0.1f}), Transform(Eigen::Translation3d(0, 0, 0.05)));
+  const auto gripper = sphere_at({0, 0, 0.12}, 0.03, "gripper");
+  EXPECT_TRUE(scene.check({gripper}).in_collision);  // touches the box (top at 0.10)
+  EXPECT_FALSE(scene.check({gripper}, {{"gripper", 2}}).in_collision);
+  EXPECT_TRUE(scene.check({sphere_at({0, 0, 0.02}, 0.03, "gripper")}, {{"gripper", 2}}).in_collision);  // the plane still counts
+  EXPECT_FALSE(scene.check({gripper}, {{"*", -1}}).in_collision);
+  EXPECT_TRUE(scene.remove(2));
+  EXPECT_FALSE(scene.remove(2));
+  EXPECT_FALSE(scene.check({gripper}).in_collision);
+  // Moving a body needs no rebuild.
+  scene.set_pose(1, Transform(Eigen::Translation3d(0, 0, 0.1)));
+  EXPECT_TRUE(scene.check({gripper}).in_collision);
+  EXPECT_THROW(scene.set_pose(99, Transform::Identity()), Error);
+}
+
+TEST(CollisionScene, RayCast) {
+  CollisionScene scene;
+  scene.set_body(3, plane(1.0f), Transform(Eigen::Translation3d(0, 0, -1)));
+  const auto hit = scene.raycast({0.2, 0.1, 1}, {0, 0, -2}, 5);
+  ASSERT_TRUE(hit.hit);
+  EXPECT_EQ(hit.body, 3);
+  EXPECT_NEAR(hit.distance_m, 2.0, 1e-5);
+  EXPECT_NEAR(hit.point.z(), -1.0, 1e-5);
+  EXPECT_NEAR(std::abs(hit.normal.z()), 1.0, 1e-5);
+  EXPECT_FALSE(scene.raycast({0.2, 0.1, 1}, {0, 0, -1}, 1.5).hit);
+  EXPECT_FALSE(scene.raycast({0.2, 0.1, 1}, {0, 0, 1}, 5).hit);
+}
+
+TEST(CollisionScene, BadInputIsRefused) {
+  CollisionScene scene;
+  EXPECT_THROW(scene.set_body(1, std::make_shared<TriangleMesh>(), Transform::Identity()), Error);
+  auto nan_mesh = plane(1.0f);
+  nan_mesh->vertices[0].x() = NAN;
+  EXPECT_THROW(scene.set_body(1, nan_mesh, Transform::Identity()), Error);
+  scene.set_body(1, plane(1.0f), Transform::Identity());
+  EXPECT_THROW(scene.check({sphere_at({0, 0, NAN}, 0.1)}), Error);
+  EXPECT_THROW(scene.check({sphere_at({0, 0, 0}, -0.1)}), Error);
+  EXPECT_THROW(scene.check({box_at(Transform::Identity(), {0.1, 0, 0.1})}), Error);
+  QueryShape hull;
+  hull.kind = QueryShape::Kind::convex_hull;
+  hull.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  EXPECT_THROW(scene.check({hull}), Error);
+  EXPECT_THROW(scene.distance({sphere_at({0, 0, 1}, 0.1)}, 0.0), Error);
+  EXPECT_THROW(scene.raycast({0, 0, 0}, {0, 0, 0}, 1), Error);
+}
+
+// Exact distance from a point to a triangle (Ericson, Real-Time Collision Detection 5.1.5).
+double point_triangle_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return (p - a).norm();
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return (p - b).norm();
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return (p - (a + ab * (d1 / (d1 - d3)))).norm();
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return (p - c).norm();
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return (p - (a + ac * (d2 / (d2 - d6)))).norm();
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return (p - (b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))))).norm();
+  const double denom = 1.0 / (va + vb + vc);
+  return (p - (a + ab * (vb * denom) + ac * (vc * denom))).norm();
+}
+
+TEST(CollisionScene, DistanceMatchesBruteForceOnTheBunny) {
+  auto bunny = std::make_shared<TriangleMesh>(io::read_mesh(test::bunny_dir() / "reconstruction" / "bun_zipper.ply"));
+  const Transform T_world_bunny = Transform(Eigen::Translation3d(0.5, -0.2, 0.1)) * Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized());
+  CollisionScene scene;
+  scene.set_body(5, bunny, T_world_bunny);
+  std::mt19937 rng(11);
+  const Eigen::AlignedBox3f box = bunny->bounds();
+  std::uniform_real_distribution<double> u(-0.08, 0.08);
+  int checked = 0, collisions = 0;
+  for (int k = 0; k < 40; ++k) {
+    const Eigen::Vector3d c_bunny = box.center().cast<double>() + Eigen::Vector3d(u(rng), u(rng), u(rng));
+    const double r = 0.01;
+    double best = 1e9;
+    for (const auto& f : bunny->faces)
+      best = std::min(best, point_triangle_distance(c_bunny, bunny->vertices[f[0]].cast<double>(), bunny->vertices[f[1]].cast<double>(),
+                                                    bunny->vertices[f[2]].cast<double>()));
+    const auto s = sphere_at(T_world_bunny * c_bunny, r);
+    const auto d = scene.distance({s}, 0.2);
+    if (best - r > 0.002) {  // clear of the surface: exact distance
+      ASSERT_TRUE(d.closest) << k;
+      EXPECT_NEAR(d.distance_m, best - r, 1e-4) << k;
+      EXPECT_FALSE(scene.check({s}).in_collision) << k;
+      ++checked;
+    } else if (best < r - 0.002) {
+      EXPECT_TRUE(scene.check({s}).in_collision) << k;
+      ++collisions;
+    }
+  }
+  EXPECT_GE(checked, 10);
+  EXPECT_GE(collisions, 3);
+}
+
+}  // namespace
+}  // namespace artisan::worldmodel

@@ -1,0 +1,67 @@
+#pragma once
+// A small workcell in a workspace, for the world-model tests: a merged environment mesh (a 1 m
+// floor with the Stanford bunny standing on it), the bunny as a model with one grasp frame, and
+// the bunny recognized where it stands (pose known exactly).
+#include <filesystem>
+
+#include "artisan/core/io/mesh_io.hpp"
+#include "artisan/worldmodel/workspace.hpp"
+#include "test_support.hpp"
+
+namespace artisan::test {
+
+struct WorldFixture {
+  worldmodel::ObjectId environment = 0, model = 0, bunny = 0;
+  Transform T_world_bunny = Transform::Identity();
+  Transform T_model_grasp = Transform::Identity();
+  size_t floor_triangles = 0;
+  TriangleMesh bunny_mesh;
+};
+
+/// A floor of `n`×`n` cells over [-0.5, 0.5]² m at z = 0, facing +z.
+inline TriangleMesh floor_mesh(int n) {
+  TriangleMesh m;
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) m.vertices.emplace_back(-0.5f + float(i) / float(n), -0.5f + float(j) / float(n), 0.0f);
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const int a = j * (n + 1) + i;
+      m.faces.emplace_back(a, a + 1, a + n + 2);
+      m.faces.emplace_back(a, a + n + 2, a + n + 1);
+    }
+  m.compute_vertex_normals();
+  return m;
+}
+
+/// Fills folder "/cell" of `ws`.
+inline WorldFixture make_world_fixture(worldmodel::Workspace& ws) {
+  using namespace worldmodel;
+  WorldFixture f;
+  f.bunny_mesh = io::read_mesh(bunny_dir() / "reconstruction" / "bun_zipper.ply");
+  const float base = f.bunny_mesh.bounds().min().y();  // the bunny stands on its y-min side
+  f.T_world_bunny = Transform(Eigen::Translation3d(0.1, -0.05, 0)) * Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitX()) *
+                    Eigen::Translation3d(0, -base, 0);
+  f.T_model_grasp = Transform(Eigen::Translation3d(-0.02, 0.15, 0.0)) * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX());
+  TriangleMesh environment = floor_mesh(100);
+  f.floor_triangles = environment.faces.size();
+  TriangleMesh placed = f.bunny_mesh;
+  placed.transform(f.T_world_bunny);
+  environment.append(placed);
+  const auto cell = ws.mkdir("/cell");
+  f.environment = ws.add(cell, make_mesh_object(ObjectKind::kMesh, "merged", "merged", environment, {"merge", {}, {}}));
+  nlohmann::json grasps = nlohmann::json::array({to_row_major(f.T_model_grasp)});
+  f.model = ws.add(ws.root(), make_mesh_object(ObjectKind::kModel, "", "bunny", f.bunny_mesh, {"import", {}, {}}, {{"T_model_grasps", grasps}}));
+  NewObject r;
+  r.kind = ObjectKind::kRecognizedModel;
+  r.subkind = "bunny";
+  r.name = "bunny-in-merged-1";
+  r.metadata = {{"model", "/bunny"},
+                {"model_id", f.model},
+                {"T_scene_model", to_row_major(f.T_world_bunny)},
+                {"figures", {{"score", 0.9}, {"overlap", 0.6}, {"rmse_m", 0.0004}, {"ambiguous", false}}}};
+  r.provenance = Provenance{"recognize", {}, {f.environment, f.model}};
+  f.bunny = ws.add(cell, r);
+  return f;
+}
+
+}  // namespace artisan::test

@@ -1,0 +1,97 @@
+#pragma once
+// The collision scene of a world model (Bullet inside): static bodies (the environment and the
+// recognized objects, exact triangle meshes in bounding-volume hierarchies) checked against
+// query shapes (boxes, spheres, cylinders, capsules, convex hulls) at poses: collision,
+// minimum distance with witness points, and ray casts.
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "artisan/core/pose.hpp"
+#include "artisan/core/triangle_mesh.hpp"
+
+namespace artisan::worldmodel {
+
+/// A convex query shape in its own frame.
+struct QueryShape {
+  enum class Kind { box, sphere, cylinder, capsule, convex_hull };
+  std::string name;                                 ///< names the shape in contacts and allowed pairs
+  Kind kind = Kind::box;
+  Eigen::Vector3d size = Eigen::Vector3d::Zero();   ///< box: full size [m]
+  double radius_m = 0.0;                            ///< sphere, cylinder, capsule [m]
+  double length_m = 0.0;                            ///< cylinder, capsule: along z [m]
+  std::vector<Eigen::Vector3f> points;              ///< convex_hull: its points [m]
+  Transform T_world_shape = Transform::Identity();
+};
+
+/// A collision that does not count: shape name (or "*") with a body ID (or -1 for any).
+struct AllowedPair {
+  std::string shape;
+  int64_t body = -1;
+};
+
+struct Contact {
+  std::string shape;
+  int64_t body = 0;
+  Eigen::Vector3d point_on_shape = Eigen::Vector3d::Zero();  ///< world frame [m]
+  Eigen::Vector3d point_on_body = Eigen::Vector3d::Zero();   ///< world frame [m]
+  double distance_m = 0.0;  ///< signed surface distance, less the body's margin; < 0 is collision
+};
+
+struct CollisionResult {
+  bool in_collision = false;
+  std::vector<Contact> contacts;  ///< the deepest contact per (shape, body) pair
+};
+
+struct DistanceResult {
+  double distance_m = 0.0;         ///< the smallest, or max_distance when nothing is nearer
+  std::optional<Contact> closest;  ///< the witness pair, when something is within max_distance
+};
+
+struct RayHit {
+  bool hit = false;
+  int64_t body = 0;
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+  double distance_m = 0.0;
+};
+
+class CollisionScene {
+ public:
+  CollisionScene();
+  ~CollisionScene();
+  CollisionScene(const CollisionScene&) = delete;
+  CollisionScene& operator=(const CollisionScene&) = delete;
+
+  /// Adds or replaces body `id`: `mesh` (in the body frame) at `T_world_body`, inflated by
+  /// `margin_m` for collision and distance. The hierarchy is built once per mesh and shared:
+  /// passing the same mesh object again (e.g. a model recognized twice) reuses it.
+  /// Throws artisan::Error for a mesh without faces or with non-finite vertices.
+  void set_body(int64_t id, std::shared_ptr<const TriangleMesh> mesh, const Transform& T_world_body, double margin_m = 0.0);
+  /// Moves a body without rebuilding anything. Throws for an unknown ID.
+  void set_pose(int64_t id, const Transform& T_world_body);
+  /// Returns false when there was no such body.
+  bool remove(int64_t id);
+  bool contains(int64_t id) const;
+  std::vector<int64_t> bodies() const;
+  size_t triangle_count() const;  ///< over all bodies
+
+  /// Which of `shapes` touch or penetrate a body closer than its margin (allowed pairs skipped).
+  /// Throws artisan::Error naming the shape when a shape is malformed (non-positive size,
+  /// non-finite pose, fewer than 4 hull points).
+  CollisionResult check(const std::vector<QueryShape>& shapes, const std::vector<AllowedPair>& allowed = {}) const;
+  /// The smallest distance between any of `shapes` and any body, up to `max_distance_m`.
+  DistanceResult distance(const std::vector<QueryShape>& shapes, double max_distance_m,
+                          const std::vector<AllowedPair>& allowed = {}) const;
+  /// The first body a ray from `origin` along `direction` meets within `max_range_m`.
+  RayHit raycast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_range_m) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace artisan::worldmodel

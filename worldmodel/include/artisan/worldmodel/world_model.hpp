@@ -1,0 +1,107 @@
+#pragma once
+// The world model of one workcell folder: the environment (merged meshes, else the members of
+// the newest MultiMesh at their registered poses, else the folder's meshes), with the surface of
+// recognized objects cut out, plus every recognized object with its pose, model, score and
+// grasp frames; and its collision scene. Operator edits (correct or accept a pose, attach,
+// detach, delete, add) are stored in the workspace as new versions with author and time, and
+// refresh() rebuilds only what changed.
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "artisan/worldmodel/collision_scene.hpp"
+#include "artisan/worldmodel/workspace.hpp"
+
+namespace artisan::worldmodel {
+
+struct SceneObject {
+  ObjectId object_id = 0;   ///< stable: the ID of the object's first version
+  ObjectId version_id = 0;  ///< the workspace row of the current version
+  int version = 1;
+  std::string path;
+  enum class Kind { environment, object } kind = Kind::object;
+  std::string model;        ///< model name (objects)
+  ObjectId model_id = 0;
+  Transform T_world_object = Transform::Identity();
+  double score = 0.0;
+  double overlap = 0.0;
+  bool ambiguous = false;
+  std::string status;       ///< "recognized", "accepted", "corrected", "added" (environment: "environment")
+  std::vector<Transform> T_world_grasps;
+  std::string attached_to;  ///< "" or e.g. "ur5/tool0"
+  Transform T_link_object = Transform::Identity();
+  double margin_m = 0.0;
+  std::shared_ptr<const TriangleMesh> mesh;  ///< in the object frame (the environment: cut)
+  std::string mesh_hash;    ///< 16 hex digits over the encoded mesh
+
+  bool same_state(const SceneObject& o) const;  ///< same version, pose, status and mesh
+};
+
+struct WorldModelOptions {
+  double cutout_distance_m = 0.004;  ///< environment triangles this near a recognized object are its surface
+  double object_margin_m = 0.0;      ///< collision margin of recognized objects [m]
+  double environment_margin_m = 0.0; ///< collision margin of the environment [m]
+};
+
+struct SceneChanges {
+  std::vector<ObjectId> changed;  ///< new or changed objects (object_id)
+  std::vector<ObjectId> removed;
+  bool empty() const { return changed.empty() && removed.empty(); }
+};
+
+class WorldModel {
+ public:
+  /// The world model of `folder` ("/" for the whole workspace). Throws when it is not a folder.
+  WorldModel(Workspace& workspace, std::string folder, WorldModelOptions options = {});
+  ~WorldModel();
+  WorldModel(const WorldModel&) = delete;
+  WorldModel& operator=(const WorldModel&) = delete;
+
+  const std::string& folder() const { return folder_; }
+  /// Bumps on every change; starts from the workspace's newest row so it grows across restarts.
+  int64_t revision() const { return revision_; }
+  const std::vector<SceneObject>& objects() const { return objects_; }
+  const SceneObject* find(ObjectId object_id) const;
+  /// A mesh of the scene by hash, encoded (artisan mesh format); throws for an unknown hash.
+  const std::vector<uint8_t>& encoded_mesh(const std::string& hash) const;
+  const CollisionScene& collision() const { return *collision_; }
+
+  /// Re-reads the folder; updates the scene and the collision scene where they changed.
+  SceneChanges refresh();
+
+  // --- operator edits: each stored as a new version (author, time, action), then refreshed ---
+  ObjectId correct_pose(ObjectId object_id, const Transform& T_world_object, const std::string& author);
+  ObjectId accept_pose(ObjectId object_id, const std::string& author);
+  ObjectId attach(ObjectId object_id, const std::string& link, const Transform& T_link_object, const std::string& author);
+  ObjectId detach(ObjectId object_id, const std::string& author);
+  ObjectId remove_object(ObjectId object_id, const std::string& author);
+  /// A new object of `model` (path, ID or name of a model object) at `T_world_object`.
+  ObjectId add_object(const std::string& model, const Transform& T_world_object, const std::string& author);
+  /// Runs recognition again on the environment meshes (every model); returns the objects made.
+  std::vector<ObjectId> rerecognize();
+
+ private:
+  struct Loaded;
+  Loaded load() const;
+  ObjectId edit(ObjectId object_id, const std::string& action, const std::string& author, nlohmann::json changes);
+  const SceneObject& object_or_throw(ObjectId object_id) const;
+
+  Workspace& ws_;
+  std::string folder_;
+  WorldModelOptions options_;
+  int64_t revision_ = 0;
+  std::vector<SceneObject> objects_;
+  std::unique_ptr<CollisionScene> collision_;
+  mutable std::map<ObjectId, std::shared_ptr<const TriangleMesh>> model_meshes_;  ///< by model row
+  std::map<std::string, std::vector<uint8_t>> encoded_;                          ///< by hash
+  mutable std::string environment_signature_;  ///< the meshes and cut-out objects it was made from
+  mutable std::shared_ptr<const TriangleMesh> environment_mesh_;
+};
+
+/// 16 hex digits of FNV-1a 64 over `bytes`.
+std::string content_hash(const std::vector<uint8_t>& bytes);
+
+}  // namespace artisan::worldmodel
