@@ -259,6 +259,7 @@ SceneChanges WorldModel::refresh() {
   for (const auto& o : objects_) used.insert(o.mesh_hash);
   std::erase_if(encoded_, [&](const auto& kv) { return !used.count(kv.first); });
   if (!changes.empty() || revision_ == 0) revision_ = std::max(revision_ + 1, loaded.newest_row);
+  last_changes_ = changes;
   return changes;
 }
 

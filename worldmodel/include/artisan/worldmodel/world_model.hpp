@@ -71,6 +71,8 @@ class WorldModel {
 
   /// Re-reads the folder; updates the scene and the collision scene where they changed.
   SceneChanges refresh();
+  /// What the last refresh (or edit) changed.
+  const SceneChanges& last_changes() const { return last_changes_; }
 
   // --- operator edits: each stored as a new version (author, time, action), then refreshed ---
   ObjectId correct_pose(ObjectId object_id, const Transform& T_world_object, const std::string& author);
@@ -93,6 +95,7 @@ class WorldModel {
   std::string folder_;
   WorldModelOptions options_;
   int64_t revision_ = 0;
+  SceneChanges last_changes_;
   std::vector<SceneObject> objects_;
   std::unique_ptr<CollisionScene> collision_;
   mutable std::map<ObjectId, std::shared_ptr<const TriangleMesh>> model_meshes_;  ///< by model row

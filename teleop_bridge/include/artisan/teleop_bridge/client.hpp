@@ -1,0 +1,70 @@
+#pragma once
+// A client of the world-model service: rebuilds the scene from LCM alone (snapshot, diffs and
+// meshes fetched by hash), asks queries and sends commands, each matched to its reply by
+// request ID. What a teleoperation or planning tool links against.
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <lcm/lcm-cpp.hpp>
+
+#include "artisan/command_result_t.hpp"
+#include "artisan/command_t.hpp"
+#include "artisan/query_reply_t.hpp"
+#include "artisan/query_t.hpp"
+#include "artisan/scene_object_t.hpp"
+#include "artisan/core/triangle_mesh.hpp"
+
+namespace artisan::teleop {
+
+struct RemoteObject {
+  artisan::scene_object_t info;               ///< as the service published it
+  Transform T_world_object = Transform::Identity();
+  std::vector<Transform> T_world_grasps;
+  std::shared_ptr<const TriangleMesh> mesh;  ///< once fetched (object frame)
+};
+
+class SceneClient {
+ public:
+  /// `pump` handles pending LCM messages for up to the given milliseconds; by default
+  /// lcm.handleTimeout(). In-process tests pass one that also ticks the service.
+  SceneClient(lcm::LCM& lcm, std::string client_id, std::function<void(int)> pump = {});
+  ~SceneClient();
+  SceneClient(const SceneClient&) = delete;
+  SceneClient& operator=(const SceneClient&) = delete;
+
+  /// Waits for a snapshot and, when `with_meshes`, fetches every mesh it references. Returns
+  /// false on timeout.
+  bool wait_for_scene(double timeout_s, bool with_meshes = true);
+  /// Waits until the scene has reached at least `revision`.
+  bool wait_for_revision(int64_t revision, double timeout_s);
+
+  bool has_scene() const;
+  int64_t revision() const;
+  std::string folder() const;
+  std::string service_id() const;
+  const std::map<int64_t, RemoteObject>& objects() const;
+  /// Meshes fetched so far, by hash (each checked against its hash).
+  size_t meshes_fetched() const;
+  /// Diffs and snapshots received.
+  int64_t updates_received() const;
+
+  /// Sends `query` (client_id and request_id filled in) and waits for its reply; throws
+  /// artisan::Error on timeout.
+  artisan::query_reply_t query(artisan::query_t query, double timeout_s = 5.0);
+  /// Sends `command` (client_id and request_id filled in) and waits for its result.
+  artisan::command_result_t command(artisan::command_t command, double timeout_s = 30.0);
+
+  /// Handles messages for up to `ms` milliseconds.
+  void pump(int ms);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace artisan::teleop
