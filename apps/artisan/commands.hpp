@@ -34,4 +34,7 @@ void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& 
 /// Registers the simulated workcell: sim scan, sim render, sim sensors, sim models.
 void add_sim_commands(CLI::App& app, const GlobalOptions& options, Action& action);
 
+/// Registers `teleop ...`: the sample client of the world-model service.
+void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& action);
+
 }  // namespace artisan::cli

@@ -1,5 +1,6 @@
 #include "artisan/teleop_bridge/client.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <random>
 #include <set>
@@ -82,7 +83,12 @@ struct SceneClient::Impl {
   }
 
   void on_chunk(const lcm::ReceiveBuffer*, const std::string&, const artisan::mesh_chunk_t* c) {
-    if (meshes.count(c->hash) || !requested.count(c->hash)) return;
+    if (meshes.count(c->hash)) return;
+    // Chunks asked for by this client, or by another for a mesh this scene uses (a replayed log).
+    const bool wanted = requested.count(c->hash) || std::any_of(objects.begin(), objects.end(), [&](const auto& kv) {
+                          return kv.second.info.mesh.hash == c->hash;
+                        });
+    if (!wanted) return;
     if (c->n_chunks <= 0 || c->chunk_index < 0 || c->chunk_index >= c->n_chunks) return;
     auto& p = partial[c->hash];
     if (p.chunks.size() != size_t(c->n_chunks)) p = Partial{std::vector<std::vector<uint8_t>>(size_t(c->n_chunks)), 0};
