@@ -7,6 +7,8 @@
 #include "artisan/worldmodel/multimesh.hpp"
 #include "artisan/worldmodel/operations.hpp"
 #include "artisan/worldmodel/recognition_store.hpp"
+#include "artisan/worldmodel/scene_export.hpp"
+#include "artisan/worldmodel/world_model.hpp"
 #include "artisan/worldmodel/workspace.hpp"
 #include "commands.hpp"
 
@@ -202,6 +204,26 @@ void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& 
       auto ws = Workspace::open(options.db);
       const auto id = worldmodel::reprocess(ws, ws.resolve(re_id).id, worldmodel::parse_settings(re_settings));
       report(options, ws, id, "reprocessed");
+      return 0;
+    };
+  });
+
+  static std::string scene_folder, scene_format = "urdf", scene_out;
+  auto* exp = app.add_subcommand("export-scene", "Write a folder's world model as URDF, SDF or glTF for other robot software");
+  exp->add_option("folder", scene_folder, "Workcell folder")->required();
+  exp->add_option("--format", scene_format, "urdf, sdf or gltf")->check(CLI::IsMember({"urdf", "sdf", "gltf"}))->capture_default_str();
+  exp->add_option("--out", scene_out, "Output folder")->required();
+  exp->callback([&options, &action] {
+    action = [&options] {
+      auto ws = Workspace::open(options.db);
+      const worldmodel::WorldModel world(ws, scene_folder);
+      const auto files = worldmodel::export_scene(world, worldmodel::scene_format_from_string(scene_format), scene_out);
+      json j = {{"folder", world.folder()}, {"revision", world.revision()}, {"objects", world.objects().size()}, {"files", json::array()}};
+      for (const auto& f : files) j["files"].push_back(f.string());
+      if (options.json) std::cout << j.dump(2) << "\n";
+      else if (!options.quiet)
+        std::cerr << "exported " << world.objects().size() << " object(s) of " << world.folder() << " as " << scene_format << " to " << scene_out << " ("
+                  << files.size() << " files)\n";
       return 0;
     };
   });

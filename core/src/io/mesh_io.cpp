@@ -13,6 +13,7 @@
 
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/atomic_file.hpp"
+#include "artisan/core/io/bytes.hpp"
 #include "artisan/core/io/ply.hpp"
 
 namespace artisan::io {
@@ -109,19 +110,11 @@ std::string obj_text(const TriangleMesh& mesh) {
   return s;
 }
 
-void write_gltf(const TriangleMesh& mesh, const std::filesystem::path& path, bool binary) {
-  // aiScene owns (and deletes) everything attached to it.
-  aiScene scene;
-  scene.mRootNode = new aiNode("root");
-  scene.mRootNode->mNumMeshes = 1;
-  scene.mRootNode->mMeshes = new unsigned[1]{0};
-  scene.mNumMaterials = 1;
-  scene.mMaterials = new aiMaterial*[1]{new aiMaterial()};
-  scene.mNumMeshes = 1;
-  scene.mMeshes = new aiMesh*[1]{new aiMesh()};
-  aiMesh& m = *scene.mMeshes[0];
+aiMesh* to_ai_mesh(const TriangleMesh& mesh, unsigned material) {
+  auto* out = new aiMesh();
+  aiMesh& m = *out;
   m.mPrimitiveTypes = aiPrimitiveType_TRIANGLE;
-  m.mMaterialIndex = 0;
+  m.mMaterialIndex = material;
   m.mNumVertices = static_cast<unsigned>(mesh.vertices.size());
   m.mVertices = new aiVector3D[m.mNumVertices];
   for (unsigned i = 0; i < m.mNumVertices; ++i) m.mVertices[i] = aiVector3D(mesh.vertices[i].x(), mesh.vertices[i].y(), mesh.vertices[i].z());
@@ -145,6 +138,33 @@ void write_gltf(const TriangleMesh& mesh, const std::filesystem::path& path, boo
     m.mFaces[f].mNumIndices = 3;
     m.mFaces[f].mIndices = new unsigned[3]{static_cast<unsigned>(mesh.faces[f][0]), static_cast<unsigned>(mesh.faces[f][1]),
                                            static_cast<unsigned>(mesh.faces[f][2])};
+  }
+  return out;
+}
+
+void write_gltf(const std::vector<SceneNode>& nodes, const std::filesystem::path& path, bool binary) {
+  // aiScene owns (and deletes) everything attached to it.
+  aiScene scene;
+  const auto n = static_cast<unsigned>(nodes.size());
+  scene.mRootNode = new aiNode("root");
+  scene.mNumMaterials = 1;
+  scene.mMaterials = new aiMaterial*[1]{new aiMaterial()};
+  scene.mNumMeshes = n;
+  scene.mMeshes = new aiMesh*[n];
+  scene.mRootNode->mNumChildren = n;
+  scene.mRootNode->mChildren = new aiNode*[n];
+  for (unsigned k = 0; k < n; ++k) {
+    scene.mMeshes[k] = to_ai_mesh(*nodes[k].mesh, 0);
+    scene.mMeshes[k]->mName = nodes[k].name;
+    auto* node = new aiNode(nodes[k].name);
+    node->mParent = scene.mRootNode;
+    node->mNumMeshes = 1;
+    node->mMeshes = new unsigned[1]{k};
+    const Eigen::Matrix4d T = nodes[k].T_parent_node.matrix();
+    node->mTransformation = aiMatrix4x4(float(T(0, 0)), float(T(0, 1)), float(T(0, 2)), float(T(0, 3)), float(T(1, 0)), float(T(1, 1)),
+                                        float(T(1, 2)), float(T(1, 3)), float(T(2, 0)), float(T(2, 1)), float(T(2, 2)), float(T(2, 3)), 0.f,
+                                        0.f, 0.f, 1.f);
+    scene.mRootNode->mChildren[k] = node;
   }
   Assimp::Exporter exporter;
   if (binary) {
@@ -215,10 +235,40 @@ void write_mesh(const TriangleMesh& mesh, const std::filesystem::path& path) {
     const auto text = obj_text(mesh);
     write_file_atomically(path, std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
   } else if (ext == ".gltf" || ext == ".glb") {
-    write_gltf(mesh, path, ext == ".glb");
+    write_gltf({{"mesh", &mesh, Transform::Identity()}}, path, ext == ".glb");
+  } else if (ext == ".stl") {
+    // Binary STL: 80-byte header, triangle count, then normal, 3 vertices and 2 spare bytes each.
+    ByteWriter w;
+    std::string header = "artisan binary STL";
+    header.resize(80, ' ');
+    w.put_bytes(std::span(reinterpret_cast<const uint8_t*>(header.data()), header.size()));
+    w.put<uint32_t>(static_cast<uint32_t>(mesh.faces.size()));
+    for (const auto& f : mesh.faces) {
+      const Eigen::Vector3f a = mesh.vertices[f[0]], b = mesh.vertices[f[1]], c = mesh.vertices[f[2]];
+      const Eigen::Vector3f n = (b - a).cross(c - a).normalized();
+      for (const Eigen::Vector3f& v : {n, a, b, c})
+        for (int k = 0; k < 3; ++k) w.put<float>(std::isfinite(v[k]) ? v[k] : 0.0f);
+      w.put<uint16_t>(0);
+    }
+    write_file_atomically(path, w.bytes());
   } else {
-    throw FileError(path, "cannot write meshes as \"" + ext + "\" (use .ply, .obj, .gltf or .glb)");
+    throw FileError(path, "cannot write meshes as \"" + ext + "\" (use .ply, .obj, .stl, .gltf or .glb)");
   }
+}
+
+void write_gltf_scene(const std::vector<SceneNode>& nodes, const std::filesystem::path& path) {
+  const auto ext = lower_extension(path);
+  if (ext != ".gltf" && ext != ".glb") throw FileError(path, "a glTF scene is written as .gltf or .glb");
+  if (nodes.empty()) throw FileError(path, "cannot write a scene without nodes");
+  for (const auto& n : nodes) {
+    if (!n.mesh) throw FileError(path, "node '" + n.name + "' has no mesh");
+    try {
+      n.mesh->validate();
+    } catch (const Error& e) {
+      throw FileError(path, "node '" + n.name + "': " + e.what());
+    }
+  }
+  write_gltf(nodes, path, ext == ".glb");
 }
 
 }  // namespace artisan::io

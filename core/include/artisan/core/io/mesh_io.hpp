@@ -2,6 +2,8 @@
 // Meshes in the formats robot tools use. Reading: PLY (own reader) and OBJ, STL, COLLADA,
 // glTF/GLB, OFF and the rest of what assimp reads. Writing: PLY, OBJ, glTF/GLB.
 #include <filesystem>
+#include <string>
+#include <vector>
 
 #include "artisan/core/triangle_mesh.hpp"
 
@@ -13,8 +15,17 @@ namespace artisan::io {
 /// Throws artisan::FileError when the file cannot be read or holds no triangles.
 TriangleMesh read_mesh(const std::filesystem::path& path);
 
-/// Writes by extension: .ply (binary), .obj, .gltf, .glb. Written atomically: on failure
+/// Writes by extension: .ply (binary), .obj, .stl (binary), .gltf, .glb. Written atomically: on failure
 /// the destination is untouched.
 void write_mesh(const TriangleMesh& mesh, const std::filesystem::path& path);
+
+/// One mesh of a glTF scene, placed by T_parent_node under the scene root.
+struct SceneNode {
+  std::string name;
+  const TriangleMesh* mesh = nullptr;
+  Transform T_parent_node = Transform::Identity();
+};
+/// Writes several meshes as the nodes of one glTF scene (.gltf with its .bin, or .glb).
+void write_gltf_scene(const std::vector<SceneNode>& nodes, const std::filesystem::path& path);
 
 }  // namespace artisan::io
