@@ -45,6 +45,20 @@ json pose_json(const Transform& T) {
 
 }  // namespace
 
+ImageDestination open_image_destination(const GlobalOptions& options, const std::string& folder, const std::string& name) {
+  ImageDestination d{worldmodel::Workspace::open(options.db), folder, name};
+  d.workspace.folder(folder);  // throws when missing
+  worldmodel::validate_name(name);
+  return d;
+}
+
+worldmodel::ObjectId import_range_image(ImageDestination& destination, const RangeImage& range, const worldmodel::Provenance& provenance,
+                                        const nlohmann::json& metadata) {
+  worldmodel::NewObject object = worldmodel::make_image_object(destination.name, range, provenance);
+  object.metadata.update(metadata);
+  return destination.workspace.add(destination.workspace.folder(destination.folder).id, object);
+}
+
 void add_sim_commands(CLI::App& app, const GlobalOptions& options, Action& action) {
   static SimArgs a;
   auto* sim = app.add_subcommand("sim", "The simulated workcell: scan, render, sensors, models");
@@ -74,24 +88,20 @@ void add_sim_commands(CLI::App& app, const GlobalOptions& options, Action& actio
       req.tilt_rad = a.tilt;
       req.seed = a.seed;
       // With a workspace, check the destination before the (slow) scan.
-      std::optional<worldmodel::Workspace> ws;
+      std::optional<ImageDestination> dest;
       std::string name = a.name.empty() ? std::filesystem::path(a.out).lexically_normal().filename().string() : a.name;
       if (name.empty()) name = std::filesystem::path(a.out).lexically_normal().parent_path().filename().string();
-      if (options.db_given) {
-        ws.emplace(worldmodel::Workspace::open(options.db));
-        ws->folder(a.folder);
-        worldmodel::validate_name(name);
-      }
+      if (options.db_given) dest.emplace(open_image_destination(options, a.folder, name));
       const auto acq = simulator.scan(req);
       sim::write_acquisition(acq, a.out);
       std::optional<worldmodel::ObjectId> image_id;
-      if (ws) {
+      if (dest) {
         json params = {{"workcell", std::filesystem::absolute(a.workcell).lexically_normal().string()}, {"sensor", a.sensor},
                        {"seed", a.seed}, {"out", std::filesystem::absolute(a.out).lexically_normal().string()}};
         if (!a.pose.empty()) params["pose"] = pose_json(*req.T_world_sensor);
         if (a.pan) params["pan_rad"] = *a.pan;
         if (a.tilt) params["tilt_rad"] = *a.tilt;
-        image_id = ws->add(ws->folder(a.folder).id, worldmodel::make_image_object(name, acq.range, {"sim-scan", params, {}}));
+        image_id = import_range_image(*dest, acq.range, {"sim-scan", params, {}});
       }
       const auto& s = simulator.settle_result();
       if (options.json) {
@@ -104,13 +114,13 @@ void add_sim_commands(CLI::App& app, const GlobalOptions& options, Action& actio
                           {"time_s", acq.truth.time_s},
                           {"T_world_sensor", pose_json(acq.truth.T_world_sensor)},
                           {"settled", {{"dropped", s.dropped}, {"at_rest", s.at_rest}, {"simulated_time_s", s.simulated_time_s}}},
-                          {"image", image_id ? json{{"id", *image_id}, {"path", ws->get(*image_id).path}} : json(nullptr)}}
+                          {"image", image_id ? json{{"id", *image_id}, {"path", dest->workspace.get(*image_id).path}} : json(nullptr)}}
                          .dump(2)
                   << "\n";
       } else if (!options.quiet) {
         std::cerr << "wrote " << a.out << ": " << acq.range.sensor.kind << " " << acq.range.width << " x " << acq.range.height
                   << ", " << acq.range.valid_count() << " valid pixels, ground truth in truth.json\n";
-        if (image_id) std::cerr << "imported as " << ws->get(*image_id).path << " (ID " << *image_id << ")\n";
+        if (image_id) std::cerr << "imported as " << dest->workspace.get(*image_id).path << " (ID " << *image_id << ")\n";
         if (!s.at_rest) std::cerr << "warning: " << s.still_moving.size() << " dropped object(s) had not come to rest\n";
       }
       return 0;

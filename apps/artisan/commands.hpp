@@ -33,6 +33,21 @@ void add_workspace_commands(CLI::App& app, const GlobalOptions& options, Action&
 void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& action);
 /// Registers the simulated workcell: sim scan, sim render, sim sensors, sim models.
 void add_sim_commands(CLI::App& app, const GlobalOptions& options, Action& action);
+/// Registers the sensor server's client commands: acquire, sensors, ptu.
+void add_sensor_commands(CLI::App& app, const GlobalOptions& options, Action& action);
+
+/// Where an acquisition goes in the workspace, checked before the (slow) acquisition: the
+/// workspace opens, the folder exists, the name is valid.
+struct ImageDestination {
+  worldmodel::Workspace workspace;
+  std::string folder;  ///< workspace path
+  std::string name;
+};
+ImageDestination open_image_destination(const GlobalOptions& options, const std::string& folder, const std::string& name);
+/// Stores a range image as an image object in the destination; `metadata` is merged into the
+/// object's metadata (e.g. environmental readings, pan/tilt state).
+worldmodel::ObjectId import_range_image(ImageDestination& destination, const RangeImage& range, const worldmodel::Provenance& provenance,
+                                        const nlohmann::json& metadata = nlohmann::json::object());
 
 /// Registers `teleop ...`: the sample client of the world-model service.
 void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& action);

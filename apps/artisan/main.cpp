@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
   artisan::cli::add_workspace_commands(app, options, action);
   artisan::cli::add_pipeline_commands(app, options, action);
   artisan::cli::add_sim_commands(app, options, action);
+  artisan::cli::add_sensor_commands(app, options, action);
   artisan::cli::add_teleop_commands(app, options, action);
   try {
     app.parse(argc, argv);
