@@ -52,4 +52,7 @@ worldmodel::ObjectId import_range_image(ImageDestination& destination, const Ran
 /// Registers `teleop ...`: the sample client of the world-model service.
 void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& action);
 
+/// Registers `render`: pictures of meshes, multimeshes, recognized models and world models.
+void add_render_command(CLI::App& app, const GlobalOptions& options, Action& action);
+
 }  // namespace artisan::cli

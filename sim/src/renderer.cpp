@@ -166,6 +166,9 @@ RenderResult Renderer::render(const Workcell& cell, const PinholeCamera& camera,
   glDisable(GL_DITHER);
   glDisable(GL_MULTISAMPLE);
   glDisable(GL_CULL_FACE);
+  // The y-down projection mirrors the window, so faces counter-clockwise seen from outside
+  // arrive clockwise: call those front faces, or two-sided lighting turns their normals inward.
+  glFrontFace(GL_CW);
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LESS);
   glDepthRange(0.0, 1.0);

@@ -33,10 +33,6 @@ int main(int argc, char** argv) {
   body.name = "bunny";
   body.instance_id = 1;
   body.mesh = merged.mesh;
-  // The merged faces are counter-clockwise seen from outside (checked in test_integration), but
-  // this renderer's y-down projection mirrors the window, so OpenGL takes them for back faces
-  // and its two-sided lighting turns their normals inward: reverse the winding for the picture.
-  for (auto& f : body.mesh.faces) std::swap(f[1], f[2]);
   body.material.color = Eigen::Vector3f(0.78f, 0.72f, 0.62f);
   body.material.specular = 0.2f;
   cell.bodies.push_back(body);
