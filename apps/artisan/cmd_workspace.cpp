@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <iostream>
+#include <map>
 
 #include <nlohmann/json.hpp>
 
@@ -111,11 +112,25 @@ json show_json(const Workspace& ws, const ObjectInfo& o) {
     json members = json::array();
     const auto all = ws.members(o.id);
     const auto T_root = worldmodel::root_transforms(all);
+    // Where the sensor was, when the member's image knows it (simulated or tracked sensors): the
+    // registration can then be checked against it.
+    std::map<int64_t, Transform> T_world_sensor;
     for (const auto& m : all) {
-      members.push_back({{"member", m.member_id}, {"mesh", m.mesh}, {"path", ws.get(m.mesh).path},
-                         {"parent_member", m.parent_member ? json(*m.parent_member) : json(nullptr)},
-                         {"T_parent_member", to_row_major(m.T_parent_member)}, {"T_root_member", to_row_major(T_root.at(m.member_id))},
-                         {"method", m.method}, {"quality", m.quality}});
+      const auto prov = ws.provenance(m.mesh);
+      if (!prov || prov->inputs.empty() || ws.get(prov->inputs.front()).kind != ObjectKind::kImage) continue;
+      if (const auto pose = ws.load_image(prov->inputs.front()).sensor.T_world_sensor) T_world_sensor[m.member_id] = *pose;
+    }
+    const auto root = all.empty() ? T_world_sensor.end() : T_world_sensor.find(all.front().member_id);
+    for (const auto& m : all) {
+      json member = {{"member", m.member_id}, {"mesh", m.mesh}, {"path", ws.get(m.mesh).path},
+                     {"parent_member", m.parent_member ? json(*m.parent_member) : json(nullptr)},
+                     {"T_parent_member", to_row_major(m.T_parent_member)}, {"T_root_member", to_row_major(T_root.at(m.member_id))},
+                     {"method", m.method}, {"quality", m.quality}};
+      if (auto it = T_world_sensor.find(m.member_id); it != T_world_sensor.end() && root != T_world_sensor.end()) {
+        const Transform error = (root->second.inverse() * it->second).inverse() * T_root.at(m.member_id);
+        member["error_vs_sensor_pose"] = {{"rotation_deg", rotation_angle(error) * 180 / M_PI}, {"translation_mm", error.translation().norm() * 1e3}};
+      }
+      members.push_back(member);
     }
     j["members"] = members;
   }
@@ -165,6 +180,9 @@ void print_show(const json& j) {
                   T[7].get<double>(), T[11].get<double>());
       if (m["quality"].contains("overlap"))
         std::printf("  overlap %.2f  rmse %.2f mm", m["quality"]["overlap"].get<double>(), m["quality"]["rmse_m"].get<double>() * 1e3);
+      if (m.contains("error_vs_sensor_pose"))
+        std::printf("  error vs sensor pose %.2f deg %.1f mm", m["error_vs_sensor_pose"]["rotation_deg"].get<double>(),
+                    m["error_vs_sensor_pose"]["translation_mm"].get<double>());
       std::printf("\n");
     }
     std::fflush(stdout);

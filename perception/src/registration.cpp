@@ -1,5 +1,7 @@
 #include "artisan/perception/registration.hpp"
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -44,6 +46,49 @@ void check_meshes(const TriangleMesh& target, const TriangleMesh& source) {
                 std::to_string(source.vertices.size()) + " vertices)");
 }
 
+// How well the inlier correspondences pin the pose down:
+//  - conditioning: smallest over largest eigenvalue of the 6x6 point-to-plane information
+//    matrix (rows [p x n, n / L], p about the inliers' centroid, L their RMS spread, so
+//    rotations and translations weigh alike); near 0 for a cylinder or a sphere;
+//  - flatness: RMS distance of the inliers from their best-fit plane [m]; a noisy plane (a
+//    floor seen by stereo) has well-spread normals but is still one plane the views slide on.
+struct Constraint {
+  double conditioning = 0.0;
+  double flatness_m = 0.0;
+};
+
+Constraint constraint(const PointCloud& src, const PointCloud& tgt, const KdTree3& tree, const Transform& T, double max_distance) {
+  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> pairs;
+  const float max_sq = float(max_distance * max_distance);
+  for (size_t i = 0; i < src.points.size(); ++i) {
+    const Eigen::Vector3f p = (T * src.points[i].cast<double>()).cast<float>();
+    const auto [j, d2] = tree.nearest(p);
+    if (d2 <= max_sq) pairs.emplace_back(p.cast<double>(), tgt.normals[j].cast<double>());
+  }
+  Constraint c;
+  if (pairs.size() < 6) return c;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const auto& [p, n] : pairs) centroid += p;
+  centroid /= double(pairs.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const auto& [p, n] : pairs) cov += (p - centroid) * (p - centroid).transpose();
+  cov /= double(pairs.size());
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> shape(cov);
+  c.flatness_m = std::sqrt(std::max(0.0, shape.eigenvalues()(0)));
+  const double spread = std::sqrt(cov.trace());
+  if (!(spread > 0)) return c;
+  Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Zero();
+  for (const auto& [p, n] : pairs) {
+    Eigen::Matrix<double, 6, 1> J;
+    J << ((p - centroid) / spread).cross(n), n;
+    H += J * J.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(H);
+  const auto& l = eig.eigenvalues();
+  c.conditioning = l(5) > 0 ? std::max(0.0, l(0)) / l(5) : 0.0;
+  return c;
+}
+
 }  // namespace
 
 RegistrationResult refine_registration(const TriangleMesh& target, const TriangleMesh& source,
@@ -67,12 +112,21 @@ RegistrationResult refine_registration(const TriangleMesh& target, const Triangl
     result.rmse_m = r.rmse_m;
   }
   result.T_target_source = T;
+  const Constraint constrained = constraint(src, tgt, tree, T, settings.icp_distance_factor * res);
+  result.conditioning = constrained.conditioning;
+  result.flatness_m = constrained.flatness_m;
   result.seconds_icp = since(t0);
   if (result.overlap_fraction < settings.min_overlap) {
     result.failure = "overlap " + std::to_string(result.overlap_fraction) + " is below the minimum " + std::to_string(settings.min_overlap);
   } else if (result.rmse_m > settings.max_rmse_factor * res) {
     result.failure = "residual " + std::to_string(result.rmse_m * 1e3) + " mm exceeds " + std::to_string(settings.max_rmse_factor) +
                      " x the resolution " + std::to_string(res * 1e3) + " mm";
+  } else if (result.conditioning < settings.min_conditioning) {
+    result.failure = "the overlap does not constrain the pose (conditioning " + std::to_string(result.conditioning) + " < " +
+                     std::to_string(settings.min_conditioning) + "): it is a surface the views could slide along";
+  } else if (result.flatness_m < settings.min_flatness_factor * res) {
+    result.failure = "the overlap is one plane (" + std::to_string(result.flatness_m * 1e3) + " mm RMS off it, under " +
+                     std::to_string(settings.min_flatness_factor) + " x the resolution): the views could slide and turn on it";
   } else {
     result.success = true;
   }

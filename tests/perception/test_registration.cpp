@@ -5,6 +5,7 @@
 
 #include <map>
 #include <numbers>
+#include <random>
 
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/ply.hpp"
@@ -128,6 +129,38 @@ TEST(Registration, AnAcceptedResultIsNeverAWrongOne) {
     }
   }
   EXPECT_GE(accepted, 23);
+}
+
+// A noisy floor seen twice: any in-plane slide or turn fits as well as the truth, so no pose
+// may be accepted, however well the noisy normals seem to constrain it.
+TEST(Registration, AnOverlapThatIsOnePlaneIsRefused) {
+  std::mt19937 rng(3);
+  std::normal_distribution<float> noise(0.0f, 0.0015f);
+  auto noisy_floor = [&] {
+    TriangleMesh m;
+    const int n = 80;
+    for (int j = 0; j <= n; ++j)
+      for (int i = 0; i <= n; ++i) m.vertices.emplace_back(0.005f * float(i), 0.005f * float(j), noise(rng));
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        const int a = j * (n + 1) + i;
+        m.faces.emplace_back(a, a + 1, a + n + 2);
+        m.faces.emplace_back(a, a + n + 2, a + n + 1);
+      }
+    return m;
+  };
+  const TriangleMesh target = noisy_floor();
+  TriangleMesh source = noisy_floor();
+  source.transform(Transform(Eigen::Translation3d(0.03, 0.01, 0)) * Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitZ()));
+  const auto r = refine_registration(target, source, Transform::Identity());
+  EXPECT_FALSE(r.success);
+  EXPECT_NE(r.failure.find("plane"), std::string::npos) << r.failure;
+  EXPECT_LT(r.flatness_m, 0.003);
+  // A real pair is not flat.
+  const auto bunny = refine_registration(scan_mesh("bun000"), scan_mesh("bun045"), truth_target_source("bun000", "bun045"));
+  EXPECT_TRUE(bunny.success) << bunny.failure;
+  EXPECT_GT(bunny.flatness_m, 0.005);
+  EXPECT_GT(bunny.conditioning, 0.01);
 }
 
 TEST(Registration, EmptyMeshesThrow) { EXPECT_THROW(register_meshes(TriangleMesh{}, scan_mesh("bun000")), Error); }

@@ -17,6 +17,8 @@ using nlohmann::json;
 json quality_json(const RegistrationResult& r) {
   return {{"overlap", r.overlap_fraction},
           {"rmse_m", r.rmse_m},
+          {"conditioning", r.conditioning},
+          {"flatness_m", r.flatness_m},
           {"consistent_correspondences", r.consistent_correspondences},
           {"candidate_correspondences", r.candidate_correspondences},
           {"resolution_m", r.resolution_m},

@@ -33,6 +33,10 @@ struct RegistrationSettings {
   /// alignment leaves residuals spread over the whole correspondence distance (RMS ~1 resolution
   /// on the bunny scans); a right one leaves sensor noise (RMS under 0.45 resolution).
   double max_rmse_factor = 0.65;
+  /// Refuse alignments whose overlap leaves a degree of freedom free (see conditioning).
+  double min_conditioning = 0.01;
+  /// Refuse alignments whose overlap lies within this x the resolution of one plane (RMS).
+  double min_flatness_factor = 1.5;
 };
 
 struct RegistrationResult {
@@ -41,6 +45,13 @@ struct RegistrationResult {
   std::string failure;                    ///< why not, when !success
   double overlap_fraction = 0.0;          ///< [1] of the source's samples that lie on the target after ICP
   double rmse_m = 0.0;                    ///< [m] point-to-plane RMS of those samples
+  /// How well the overlap pins down all six degrees of freedom: smallest over largest eigenvalue
+  /// of the point-to-plane information matrix of the inliers (translations scaled by their
+  /// spread). Near 0 when the overlap is one plane (or a cylinder...) that could slide.
+  double conditioning = 0.0;
+  /// RMS distance of the overlap from its best-fit plane [m]: small when the views only share
+  /// a plane (a floor), however noisy its normals.
+  double flatness_m = 0.0;
   size_t consistent_correspondences = 0;  ///< in the winning group
   size_t candidate_correspondences = 0;   ///< after similarity and consistency filtering
   size_t groups_verified = 0;
