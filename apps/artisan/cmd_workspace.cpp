@@ -12,6 +12,7 @@
 #include "artisan/worldmodel/recognition_store.hpp"
 #include "artisan/worldmodel/workspace.hpp"
 #include "commands.hpp"
+#include "progress.hpp"
 
 namespace artisan::cli {
 
@@ -323,6 +324,7 @@ void add_workspace_commands(CLI::App& app, const GlobalOptions& options, Action&
         io::Geometry geometry;
       };
       std::vector<Item> items;
+      Progress reading("reading", imp.files.size(), options.quiet || options.json);
       for (const auto& f : imp.files) {
         const std::string name = imp.name.empty() ? std::filesystem::path(f).stem().string() : imp.name;
         try {
@@ -331,10 +333,13 @@ void add_workspace_commands(CLI::App& app, const GlobalOptions& options, Action&
           throw Error(f + ": " + e.what() + " (choose one with --name)");
         }
         items.push_back({f, name, io::load_geometry(f)});
+        reading.update(items.size(), f);
       }
       std::vector<ObjectId> ids;
+      Progress storing("storing", items.size(), options.quiet || options.json);
       ws.write([&] {
         for (auto& item : items) {
+          storing.update(ids.size(), item.name);
           json params = {{"source", std::filesystem::absolute(item.file).lexically_normal().string()},
                          {"source_bytes", std::filesystem::file_size(item.file)},
                          {"as", imp.as.empty() ? "auto" : imp.as}, {"scale", imp.scale}};
@@ -363,6 +368,7 @@ void add_workspace_commands(CLI::App& app, const GlobalOptions& options, Action&
             throw Error(item.file + " holds a point cloud without a grid; only range images and meshes can be imported");
           }
         }
+        storing.update(items.size());
       });
       json out = json::array();
       for (ObjectId id : ids) {
