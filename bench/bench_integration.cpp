@@ -4,7 +4,10 @@
 // cache's peak and the process's peak RSS against the memory budget (blocks kept in files, so the
 // store does not count; the peak is reset before each run through /proc/self/clear_refs), and
 // the two acceptance figures of issue 6 measured point-to-surface against Stanford's
-// bun_zipper.ply. Beside it, on the same meshed scans (vertices with their normals, in the world
+// bun_zipper.ply. Each voxel size runs twice: paged (blocks in files under a budget of 32, 64,
+// 128 MiB, several times smaller than the grid) and in memory (no budget: the arithmetic without
+// the paging); distribute_cpu_s is the process CPU time, steadier than wall time on a shared
+// machine. Beside it, on the same meshed scans (vertices with their normals, in the world
 // frame) and machine: PCL's Poisson surface reconstruction at depths 8 and 9.
 // Open3D is not measured: Debian's python3-open3d is not installed.
 #include <fcntl.h>
@@ -12,6 +15,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <ctime>
 #include <cstdio>
 #include <fstream>
 #include <string>
@@ -41,6 +45,14 @@ size_t status_kib(const std::string& field) {
   return 0;
 }
 
+// CPU time of the whole process [s] (every thread): with other jobs on the machine, wall time
+// varies from run to run, CPU time much less.
+double cpu_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
 void reset_peak_rss() {
   std::ofstream("/proc/self/clear_refs") << "5";
 }
@@ -48,20 +60,25 @@ void reset_peak_rss() {
 const std::vector<std::string> kScans = {"bun000", "bun045", "bun090", "bun180", "bun270",
                                          "bun315", "chin",   "ear_back", "top2", "top3"};
 
+// paged: blocks in files under `budget`; otherwise every block in memory (budget unlimited), which
+// measures the arithmetic of distribution without the paging.
 nlohmann::json run_grid(const std::vector<artisan::test::PlacedScan>& scans, const artisan::TriangleMesh& reference,
-                        double voxel, size_t budget) {
+                        double voxel, size_t budget, bool paged = true) {
   artisan::GridDefinition def;
   def.voxel_size_m = voxel;
-  def.memory_budget_bytes = budget;
+  def.memory_budget_bytes = paged ? budget : size_t{1} << 40;
   const auto dir = std::filesystem::temp_directory_path() / ("artisan-bench-grid-" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
-  artisan::test::FileBlockStore store(dir);
+  artisan::test::FileBlockStore files(dir);
+  artisan::InMemoryBlockStore memory;
+  artisan::BlockStore& store = paged ? static_cast<artisan::BlockStore&>(files) : memory;
   reset_peak_rss();
   const size_t rss_before = status_kib("VmRSS");
   artisan::OccupancyGrid grid(def, store);
   size_t vertices = 0, samples = 0, updates = 0;
   double distribute_s = 0;
+  const double cpu0 = cpu_seconds();
   for (size_t i = 0; i < scans.size(); ++i) {
     const auto r = grid.distribute(scans[i].mesh_scan, scans[i].T_world_scan, artisan::test::cyberware_view(),
                                    static_cast<int>(i));
@@ -70,6 +87,7 @@ nlohmann::json run_grid(const std::vector<artisan::test::PlacedScan>& scans, con
     updates += r.voxel_updates;
     distribute_s += r.seconds;
   }
+  const double distribute_cpu_s = cpu_seconds() - cpu0;
   const auto t0 = Clock::now();
   grid.flush();
   const double flush_s = since(t0);
@@ -80,13 +98,17 @@ nlohmann::json run_grid(const std::vector<artisan::test::PlacedScan>& scans, con
   const auto acc = artisan::test::merge_accuracy(merged.mesh, reference);
   nlohmann::json j;
   j["voxel_size_m"] = voxel;
-  j["memory_budget_bytes"] = budget;
+  j["blocks"] = paged ? nullptr : nlohmann::json(memory.size());
+  j["store"] = paged ? "files, paged to the budget" : "in memory, no budget";
+  j["memory_budget_bytes"] = def.memory_budget_bytes;
   j["distribute_s"] = distribute_s;
   j["input_vertices"] = vertices;
   j["surface_samples"] = samples;
   j["voxel_updates"] = updates;
   j["distribute_vertices_per_s"] = vertices / distribute_s;
   j["distribute_samples_per_s"] = samples / distribute_s;
+  j["distribute_cpu_s"] = distribute_cpu_s;
+  j["distribute_samples_per_cpu_s"] = samples / distribute_cpu_s;
   j["distribute_voxel_updates_per_s"] = updates / distribute_s;
   j["flush_s"] = flush_s;
   j["extract_s"] = merged.seconds;
@@ -98,7 +120,8 @@ nlohmann::json run_grid(const std::vector<artisan::test::PlacedScan>& scans, con
   j["cache_evictions"] = stats.evictions;
   j["rss_before_mib"] = rss_before / 1024.0;
   j["peak_rss_mib"] = peak / 1024.0;
-  j["peak_rss_minus_budget_mib"] = peak / 1024.0 - budget / 1048576.0;
+  if (paged) j["peak_rss_minus_budget_mib"] = peak / 1024.0 - static_cast<double>(def.memory_budget_bytes) / 1048576.0;
+  else j["peak_rss_minus_budget_mib"] = nullptr;  // no budget: every block stays in memory
   j["accuracy_within_0_5mm"] = acc.accuracy_0_5mm;
   j["completeness_within_1mm"] = acc.completeness_1mm;
   return j;
@@ -153,18 +176,32 @@ nlohmann::json run_poisson(const std::vector<artisan::test::PlacedScan>& scans, 
 
 }  // namespace
 
-int main() {
+// --grid-only: skip PCL's Poisson; --quick / --quick-paged: the 0.5 mm run in memory / paged only
+// (tuning).
+int main(int argc, char** argv) {
+  const std::string mode = argc > 1 ? argv[1] : "";
+  const bool grid_only = mode == "--grid-only";
   const auto dir = std::filesystem::path(ARTISAN_DATA_DIR) / "stanford-bunny";
   const auto scans = artisan::test::load_placed_bunny_scans(dir, kScans);
   const auto ref_path = dir / "reconstruction" / "bun_zipper.ply";
   const auto reference = artisan::io::ply_to_mesh(artisan::io::read_ply(ref_path), ref_path);
   nlohmann::json j;
   j["threads"] = omp_get_max_threads();
+  if (mode == "--quick" || mode == "--quick-paged") {  // one 0.5 mm run (tuning)
+    std::printf("%s\n", run_grid(scans, reference, 0.0005, size_t{64} << 20, mode == "--quick-paged").dump(2).c_str());
+    return 0;
+  }
   j["scans"] = kScans;
   j["grid"] = nlohmann::json::array();
   j["grid"].push_back(run_grid(scans, reference, 0.001, size_t{32} << 20));
   j["grid"].push_back(run_grid(scans, reference, 0.0005, size_t{64} << 20));
   j["grid"].push_back(run_grid(scans, reference, 0.00025, size_t{128} << 20));
+  j["grid_in_memory"] = nlohmann::json::array();
+  for (double voxel : {0.001, 0.0005, 0.00025}) j["grid_in_memory"].push_back(run_grid(scans, reference, voxel, 0, false));
+  if (grid_only) {
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
   j["pcl_poisson"] = nlohmann::json::array();
   j["pcl_poisson"].push_back(run_poisson(scans, reference, 8));
   j["pcl_poisson"].push_back(run_poisson(scans, reference, 9));

@@ -1,8 +1,9 @@
 // World-model service: collision-query latency (median, p99) for a gripper and for a six-joint
 // arm (the UR5 of the pipework workcell, convex hulls of its collision meshes) against a
 // 1-million-triangle environment with 20 recognized objects; sustained queries per second; and
-// over LCM (memq://, in process): query round trip and the time from an operator's change to a
-// client seeing it. JSON on stdout.
+// over LCM (memq://, in process): query round trip, the time from an operator's change to a
+// client seeing it, and to the client seeing the environment re-cut around it (the second diff).
+// Also ray casts, the arm's boolean check (stop at first) and its distance. JSON on stdout.
 #include <algorithm>
 #include <chrono>
 #include <iostream>
@@ -102,6 +103,8 @@ int main() {
   out["gripper"] = {{"collision", latency(check_s)}, {"distance_0.2m", latency(distance_s)}, {"in_collision_fraction", collisions / 2000.0}};
 
   // Sustained collision queries per second, one core.
+  // (its own random numbers, so the arm's configurations below do not depend on the timing)
+  const auto rng_state = rng;
   t0 = Clock::now();
   int queries = 0;
   while (seconds_since(t0) < 2.0) {
@@ -109,6 +112,17 @@ int main() {
     ++queries;
   }
   out["gripper"]["queries_per_s"] = queries / seconds_since(t0);
+  rng = rng_state;
+
+  // Ray casts straight down onto the scene.
+  std::vector<double> ray_s;
+  for (int i = 0; i < 2000; ++i) {
+    const Eigen::Vector3d o(ux(rng), ux(rng), 0.5);
+    const auto t = Clock::now();
+    scene.raycast(o, {0, 0, -1}, 2.0);
+    ray_s.push_back(seconds_since(t));
+  }
+  out["raycast"] = latency(ray_s);
 
   // The UR5: convex hulls of its collision meshes at random joint values within limits.
   auto cell = sim::load_workcell(data + "/workcells/pipework.json");
@@ -117,8 +131,8 @@ int main() {
   for (const auto& b : cell.bodies)
     if (b.role == sim::BodyRole::robot_link && b.robot == "ur5") links.push_back(&b);
   const Transform T_world_root = Transform(Eigen::Translation3d(0, 0, 0.02));
-  std::vector<double> arm_s;
-  int arm_collisions = 0;
+  std::vector<double> arm_s, arm_any_s, arm_distance_s;
+  int arm_collisions = 0, arm_disagree = 0;
   size_t hull_points = 0;
   for (int i = 0; i < 1000; ++i) {
     for (auto& j : robot.joints)
@@ -137,12 +151,23 @@ int main() {
     }
     // The base stands on the floor: that contact is allowed.
     const std::vector<worldmodel::AllowedPair> allowed = {{"base_link", 0}, {"shoulder_link", 0}};
-    const auto t = Clock::now();
-    arm_collisions += scene.check(shapes, allowed).in_collision;
+    auto t = Clock::now();
+    const bool hit = scene.check(shapes, allowed).in_collision;
     arm_s.push_back(seconds_since(t));
+    arm_collisions += hit;
+    // A planner's boolean check: stop at the first colliding link.
+    t = Clock::now();
+    const bool any = scene.check(shapes, allowed, {.deepest_contacts = false, .stop_at_first = true}).in_collision;
+    arm_any_s.push_back(seconds_since(t));
+    if (any != hit) ++arm_disagree;
+    t = Clock::now();
+    scene.distance(shapes, 0.2, allowed);
+    arm_distance_s.push_back(seconds_since(t));
   }
   out["arm"] = {{"robot", "ur5"}, {"links", links.size()}, {"hull_points_per_link", hull_points / 1000 / std::max<size_t>(1, links.size())},
-                {"collision", latency(arm_s)}, {"in_collision_fraction", arm_collisions / 1000.0}};
+                {"collision", latency(arm_s)}, {"collision_stop_at_first", latency(arm_any_s)},
+                {"distance_0.2m", latency(arm_distance_s)}, {"in_collision_fraction", arm_collisions / 1000.0},
+                {"stop_at_first_disagreements", arm_disagree}};
 
   // --- through the service over LCM (memq://) -----------------------------------------------
   const auto dir = std::filesystem::temp_directory_path() / ("artisan-bench-wm-" + std::to_string(::getpid()));
@@ -200,7 +225,7 @@ int main() {
       rtt.push_back(seconds_since(t));
     }
     // An operator moves an object: time until another client has the diff.
-    std::vector<double> change_s;
+    std::vector<double> change_s, environment_s;
     const auto first = client.objects().rbegin()->first;
     for (int i = 0; i < 5; ++i) {
       artisan::command_t c;
@@ -215,10 +240,13 @@ int main() {
       const auto r = client.command(c, 120);
       client.wait_for_revision(r.revision, 60);
       change_s.push_back(seconds_since(t));
+      // The environment's re-cut follows as a diff of its own (the next revision).
+      while (client.revision() <= r.revision && seconds_since(t) < 60) client.pump(5);
+      environment_s.push_back(seconds_since(t));
     }
     out["lcm_memq"] = {{"service_start_s", start_s}, {"late_join_with_meshes_s", join_s}, {"scene_complete", got},
                        {"meshes_fetched", client.meshes_fetched()}, {"query_round_trip", latency(rtt)},
-                       {"change_to_client", latency(change_s)}};
+                       {"change_to_client", latency(change_s)}, {"environment_recut_to_client", latency(environment_s)}};
   }
   std::filesystem::remove_all(dir);
   out["goals"] = {{"collision_p99_ms", 1.0}, {"change_to_client_ms", 5.0}};

@@ -52,6 +52,9 @@ worldmodel::ObjectId import_range_image(ImageDestination& destination, const Ran
 /// Registers `teleop ...`: the sample client of the world-model service.
 void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& action);
 
+/// Registers the merging commands: grid new/add/extract, merge.
+void add_grid_commands(CLI::App& app, const GlobalOptions& options, Action& action);
+
 /// Registers `render`: pictures of meshes, multimeshes, recognized models and world models.
 void add_render_command(CLI::App& app, const GlobalOptions& options, Action& action);
 

@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   artisan::cli::add_sensor_commands(app, options, action);
   artisan::cli::add_teleop_commands(app, options, action);
   artisan::cli::add_render_command(app, options, action);
+  artisan::cli::add_grid_commands(app, options, action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -306,6 +306,7 @@ struct Service::Impl {
     r.revision = world.revision();
     r.utime = now_utime();
     lcm.publish(kCommandResultChannel, &r);
+    poll_environment();  // starts the environment's re-cut, now that the diff is out
   }
 
   void heartbeat() {
@@ -323,7 +324,21 @@ struct Service::Impl {
     last_heartbeat = Clock::now();
   }
 
+  // The environment re-cut on the worker thread, once it is ready.
+  void poll_environment() {
+    const int64_t base = world.revision();
+    try {
+      const auto changes = world.poll_environment();
+      if (changes.empty()) return;
+      publish_changes(base, changes);
+      publish_snapshot();
+    } catch (const std::exception& e) {
+      status = std::string("cannot re-cut the environment: ") + e.what();
+    }
+  }
+
   void tick() {
+    poll_environment();
     if (seconds_since(last_poll) >= options.poll_period_s) {
       refresh();
       publish_environment();

@@ -189,5 +189,98 @@ TEST(CollisionScene, DistanceMatchesBruteForceOnTheBunny) {
   EXPECT_GE(collisions, 3);
 }
 
+// Method: the same queries against the bunny as one body (hierarchy, separating-axis and distance
+// pruning, first-contact early exit) and as one body per triangle (nothing to prune but each
+// triangle's own bounds): pruning must never change an answer. Boxes, cylinders and convex hulls
+// (random points in an ellipsoid, as a robot link), with and without a margin.
+TEST(CollisionScene, PruningNeverChangesTheAnswer) {
+  const auto bunny = io::read_mesh(test::bunny_dir() / "reconstruction" / "bun_zipper.ply");
+  const Transform T_world_bunny = Transform(Eigen::Translation3d(0.1, 0.2, -0.1)) * Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 0, 1).normalized());
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  // The triangles near the bunny's middle, one body each (ID = 1000 + index), and all of them as one.
+  const Eigen::Vector3f centre = bunny.bounds().center();
+  auto part = std::make_shared<TriangleMesh>();
+  part->vertices = bunny.vertices;
+  for (const auto& f : bunny.faces)
+    if ((bunny.vertices[size_t(f[0])] - centre).norm() < 0.045f) part->faces.push_back(f);
+  ASSERT_GT(part->faces.size(), 3000u);
+  for (double margin : {0.0, 0.003}) {
+    CollisionScene whole, each;
+    whole.set_body(1, part, T_world_bunny, margin);
+    for (size_t i = 0; i < part->faces.size(); ++i) {
+      auto t = std::make_shared<TriangleMesh>();
+      for (int k = 0; k < 3; ++k) t->vertices.push_back(part->vertices[size_t(part->faces[i][k])]);
+      t->faces = {{0, 1, 2}};
+      each.set_body(int64_t(1000 + i), t, T_world_bunny, margin);
+    }
+    std::vector<Eigen::Vector3f> hull_points;
+    for (int i = 0; i < 60; ++i) hull_points.emplace_back(float(0.02 * u(rng)), float(0.015 * u(rng)), float(0.05 * u(rng)));
+    int collisions = 0, free = 0;
+    for (int k = 0; k < 60; ++k) {
+      QueryShape s;
+      s.name = "probe";
+      s.kind = k % 3 == 0 ? QueryShape::Kind::box : k % 3 == 1 ? QueryShape::Kind::cylinder : QueryShape::Kind::convex_hull;
+      s.size = {0.03, 0.02, 0.05};
+      s.radius_m = 0.012;
+      s.length_m = 0.04;
+      s.points = hull_points;
+      s.T_world_shape = T_world_bunny * Transform(Eigen::Translation3d(centre.cast<double>() + 0.05 * Eigen::Vector3d(u(rng), u(rng), u(rng)))) *
+                        Eigen::AngleAxisd(M_PI * u(rng), Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized());
+      const auto a = whole.check({s});
+      const auto b = each.check({s}, {}, CheckOptions{.deepest_contacts = false, .stop_at_first = true});
+      ASSERT_EQ(a.in_collision, b.in_collision) << k << " margin " << margin;
+      (a.in_collision ? collisions : free)++;
+      if (a.in_collision) {
+        ASSERT_EQ(a.contacts.size(), 1u);
+        EXPECT_LE(a.contacts[0].distance_m, 1e-9);
+        // The deepest contact over the body equals the deepest over the triangles.
+        const auto deep = whole.check({s}, {}, CheckOptions{.deepest_contacts = true, .stop_at_first = false});
+        double deepest = 1e9;
+        for (const auto& c : each.check({s}).contacts) deepest = std::min(deepest, c.distance_m);
+        EXPECT_NEAR(deep.contacts[0].distance_m, deepest, 1e-6) << k;
+      }
+      const auto da = whole.distance({s}, 0.05), db = each.distance({s}, 0.05);
+      // In collision, distance() stops at the first penetration it finds: only the sign compares.
+      if (a.in_collision) EXPECT_LT(da.distance_m, 1e-9) << k;
+      else EXPECT_NEAR(da.distance_m, db.distance_m, 1e-6) << k << " margin " << margin;
+      if (da.closest) {
+        // Witnesses: as far apart as the distance (plus the margin), in the world frame.
+        EXPECT_NEAR((da.closest->point_on_shape - da.closest->point_on_body).norm(), std::abs(da.distance_m + margin), 2e-4) << k;
+      }
+    }
+    EXPECT_GE(collisions, 10);
+    EXPECT_GE(free, 10);
+  }
+}
+
+TEST(CollisionScene, StopAtFirstReportsOneContact) {
+  CollisionScene scene;
+  scene.set_body(1, plane(1.0f), Transform::Identity());
+  scene.set_body(2, plane(1.0f), Transform(Eigen::Translation3d(0, 0, 0.01)));
+  const auto s = sphere_at({0, 0, 0.005}, 0.02);
+  EXPECT_EQ(scene.check({s}).contacts.size(), 2u);
+  const auto first = scene.check({s}, {}, CheckOptions{.deepest_contacts = false, .stop_at_first = true});
+  EXPECT_TRUE(first.in_collision);
+  EXPECT_EQ(first.contacts.size(), 1u);
+}
+
+TEST(CollisionScene, PrebuiltGeometryIsSharedAndMovable) {
+  auto mesh = box_mesh({0.2f, 0.2f, 0.2f});
+  const auto geometry = CollisionScene::build_geometry(mesh);
+  CollisionScene scene;
+  scene.set_body(1, geometry, Transform(Eigen::Translation3d(1, 0, 0)));
+  scene.set_body(2, geometry, Transform(Eigen::Translation3d(-1, 0, 0)));
+  EXPECT_EQ(scene.triangle_count(), 24u);
+  EXPECT_TRUE(scene.check({sphere_at({1.1, 0, 0}, 0.01)}).in_collision);
+  EXPECT_TRUE(scene.check({sphere_at({-1.1, 0, 0}, 0.01)}).in_collision);
+  const auto hit = scene.raycast({0, 0, 0}, {1, 0, 0}, 5);
+  ASSERT_TRUE(hit.hit);
+  EXPECT_EQ(hit.body, 1);
+  EXPECT_NEAR(hit.distance_m, 0.9, 1e-6);
+  EXPECT_NEAR(hit.normal.x(), -1.0, 1e-6);  // facing the ray's origin
+  EXPECT_THROW(CollisionScene::build_geometry(std::make_shared<TriangleMesh>()), Error);
+}
+
 }  // namespace
 }  // namespace artisan::worldmodel

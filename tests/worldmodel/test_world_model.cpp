@@ -120,6 +120,44 @@ TEST_F(WorldModelTest, EditsAreStoredAsVersionsAndUpdateTheScene) {
   EXPECT_TRUE(ws.check().problems.empty());
 }
 
+// Method: the same edit with the environment re-cut in the background ends in the same scene as
+// the synchronous one (same environment hash), in two steps: the object at once, the environment
+// as a change of its own with a higher revision.
+TEST_F(WorldModelTest, EnvironmentIsRecutInTheBackgroundAfterAnEdit) {
+  WorldModelOptions options;
+  options.environment_in_background = true;
+  WorldModel wm(ws, "/cell", options);
+  const std::string env_before = wm.objects()[0].mesh_hash;
+  const Transform moved = Transform(Eigen::Translation3d(-0.3, 0.2, 0)) * f.T_world_bunny;
+  wm.correct_pose(f.bunny, moved, "alice");
+  // At once: the object moved (scene and collision), the environment not yet.
+  EXPECT_EQ(wm.last_changes().changed, std::vector<ObjectId>{f.bunny});
+  EXPECT_TRUE(wm.find(f.bunny)->T_world_object.isApprox(moved, 1e-9));
+  EXPECT_TRUE(wm.collision().check({ball(moved * f.bunny_mesh.bounds().center().cast<double>(), 0.02)}).in_collision);
+  EXPECT_EQ(wm.objects()[0].mesh_hash, env_before);
+  const auto r1 = wm.revision();
+  // The first poll starts the worker, a later one installs its cut.
+  SceneChanges env_changes;
+  for (int i = 0; i < 3 && env_changes.empty(); ++i) env_changes = wm.poll_environment(true);
+  EXPECT_EQ(env_changes.changed, std::vector<ObjectId>{f.environment});
+  EXPECT_FALSE(wm.environment_pending());
+  EXPECT_NE(wm.objects()[0].mesh_hash, env_before);
+  EXPECT_GT(wm.revision(), r1);
+  EXPECT_NO_THROW(wm.encoded_mesh(wm.objects()[0].mesh_hash));
+  EXPECT_THROW(wm.encoded_mesh(env_before), Error);  // no longer used
+  // The old place is no longer cut out: the ball meets the environment there.
+  const auto old_place = wm.collision().check({ball(bunny_centre(), 0.03)});
+  ASSERT_TRUE(old_place.in_collision);
+  for (const auto& c : old_place.contacts) EXPECT_EQ(c.body, f.environment);
+  // The same environment as a synchronous world model makes from the workspace.
+  WorldModel sync(ws, "/cell");
+  EXPECT_EQ(sync.objects()[0].mesh_hash, wm.objects()[0].mesh_hash);
+  EXPECT_GE(sync.revision(), wm.revision());
+  // Nothing more to do.
+  EXPECT_TRUE(wm.poll_environment().empty());
+  EXPECT_TRUE(wm.refresh().empty());
+}
+
 TEST_F(WorldModelTest, ChangesFromOtherProcessesAreSeenByRefresh) {
   WorldModel wm(ws, "/cell");
   // Someone else (e.g. `artisan recognize`) adds an instance.

@@ -1,23 +1,63 @@
-// Collision scene on Bullet: one btCollisionObject per body with a quantized BVH over the exact
-// triangles; query shapes are convex and tested body by body with contactPairTest (closest-point
-// algorithms, so positive distances up to a threshold are reported too).
+// Collision scene: each body's triangles in a bounding-volume hierarchy of its own (binary AABB
+// tree split at the median centroid of the longest axis, leaves of up to 4 triangles whose
+// vertices are stored in leaf order), in the body frame. A query shape is moved into each body's
+// frame and walks the tree:
+//  - pruning, never deciding: a node or triangle is skipped only when a lower bound of its
+//    distance to the shape exceeds the reach (the body's margin for collision; the best distance
+//    so far for distance queries). Lower bounds: the gap between axis-aligned boxes, and the
+//    separating-axis gaps against the shape's oriented bounding box (its 3 axes for nodes; for
+//    triangles all 13 box/triangle axes, Akenine-Moeller 2001, which for a box is exact);
+//  - deciding, exactly, per surviving triangle: closest point on the triangle for spheres
+//    (Ericson, Real-Time Collision Detection 5.1.5), Bullet's GJK (EPA when penetrating) for the
+//    other shapes.
+// Collision checks stop a (shape, body) pair at its first colliding triangle unless the deepest
+// contact is asked for; distance queries visit nearer children first and shrink the reach as
+// they go (closest pair with branch and bound), as FCL does, and stop at the first penetration.
 #include "artisan/worldmodel/collision_scene.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <map>
+#include <mutex>
+#include <numeric>
+#include <unordered_map>
 
 #include <btBulletCollisionCommon.h>
+#include <BulletCollision/CollisionShapes/btTriangleShape.h>
+#include <BulletCollision/NarrowPhaseCollision/btGjkEpaPenetrationDepthSolver.h>
+#include <BulletCollision/NarrowPhaseCollision/btGjkPairDetector.h>
+#include <BulletCollision/NarrowPhaseCollision/btPointCollector.h>
+#include <BulletCollision/NarrowPhaseCollision/btVoronoiSimplexSolver.h>
 
 #include "artisan/core/error.hpp"
 
 namespace artisan::worldmodel {
+
+// The hierarchy over one mesh, in the body frame.
+class BodyGeometry {
+ public:
+  struct Node {
+    Eigen::Vector3f lo, hi;
+    int32_t index = 0;  ///< leaf: first triangle; inner node: first of its two children
+    int32_t count = 0;  ///< leaf: number of triangles; inner node: 0
+  };
+  struct Tri {
+    Eigen::Vector3f a, b, c;
+  };
+  std::shared_ptr<const TriangleMesh> mesh;
+  std::vector<Node> nodes;  ///< nodes[0] is the root
+  std::vector<Tri> tris;    ///< in leaf order
+};
+
 namespace {
 
 // Query shapes keep a small margin: GJK is robust with one, and boxes/cylinders keep their size
 // (Bullet puts their margin inside); hulls are shrunk by it towards their centroid.
 constexpr double kShapeMargin = 1e-4;
+constexpr int kLeafSize = 4;
 
 btTransform to_bt(const Transform& T) {
   const Eigen::Matrix3d R = T.rotation();
@@ -25,69 +65,273 @@ btTransform to_bt(const Transform& T) {
   return btTransform(basis, btVector3(T.translation().x(), T.translation().y(), T.translation().z()));
 }
 
+btVector3 to_bt(const Eigen::Vector3f& v) { return btVector3(v.x(), v.y(), v.z()); }
 Eigen::Vector3d to_eigen(const btVector3& v) { return {v.x(), v.y(), v.z()}; }
 
 bool finite_pose(const Transform& T) { return T.matrix().allFinite(); }
 
-struct MeshEntry {
-  std::shared_ptr<const TriangleMesh> mesh;
-  std::unique_ptr<btTriangleIndexVertexArray> arrays;
-  std::unique_ptr<btBvhTriangleMeshShape> shape;
-};
+using Geometry = BodyGeometry;
 
-struct Body {
-  int64_t id = 0;
-  std::shared_ptr<MeshEntry> entry;
-  std::unique_ptr<btCollisionObject> object;
-  double margin_m = 0.0;
-};
-
-std::unique_ptr<btConvexShape> make_shape(const QueryShape& s) {
-  const auto bad = [&](const std::string& what) { return Error("query shape '" + s.name + "': " + what); };
-  if (!finite_pose(s.T_world_shape)) throw bad("pose is not finite");
-  std::unique_ptr<btConvexShape> shape;
-  switch (s.kind) {
-    case QueryShape::Kind::box:
-      if (!(s.size.allFinite() && s.size.minCoeff() > 0)) throw bad("box size must be positive");
-      shape = std::make_unique<btBoxShape>(btVector3(s.size.x() / 2, s.size.y() / 2, s.size.z() / 2));
-      break;
-    case QueryShape::Kind::sphere:
-      if (!(std::isfinite(s.radius_m) && s.radius_m > 0)) throw bad("sphere radius must be positive");
-      return std::make_unique<btSphereShape>(s.radius_m);  // a sphere is all margin
-    case QueryShape::Kind::cylinder:
-      if (!(std::isfinite(s.radius_m) && s.radius_m > 0 && std::isfinite(s.length_m) && s.length_m > 0))
-        throw bad("cylinder radius and length must be positive");
-      shape = std::make_unique<btCylinderShapeZ>(btVector3(s.radius_m, s.radius_m, s.length_m / 2));
-      break;
-    case QueryShape::Kind::capsule:
-      if (!(std::isfinite(s.radius_m) && s.radius_m > 0 && std::isfinite(s.length_m) && s.length_m >= 0))
-        throw bad("capsule radius must be positive and length not negative");
-      return std::make_unique<btCapsuleShapeZ>(s.radius_m, s.length_m);
-    case QueryShape::Kind::convex_hull: {
-      if (s.points.size() < 4) throw bad("a convex hull needs at least 4 points");
-      Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-      for (const auto& p : s.points) {
-        if (!p.allFinite()) throw bad("hull point is not finite");
-        centroid += p.cast<double>();
-      }
-      centroid /= double(s.points.size());
-      auto hull = std::make_unique<btConvexHullShape>();
-      for (const auto& p : s.points) {
-        // Bullet adds a hull's margin outside it: pull the points in by as much.
-        Eigen::Vector3d q = p.cast<double>();
-        const Eigen::Vector3d d = q - centroid;
-        const double n = d.norm();
-        if (n > kShapeMargin) q -= d / n * kShapeMargin;
-        hull->addPoint(btVector3(q.x(), q.y(), q.z()), false);
-      }
-      hull->recalcLocalAabb();
-      hull->optimizeConvexHull();
-      shape = std::move(hull);
-      break;
-    }
+std::shared_ptr<Geometry> build(std::shared_ptr<const TriangleMesh> mesh) {
+  if (mesh->faces.empty()) throw Error("collision scene: a body mesh has no triangles");
+  mesh->validate();
+  auto g = std::make_shared<Geometry>();
+  g->mesh = mesh;
+  const auto& V = mesh->vertices;
+  const auto& F = mesh->faces;
+  const int n = int(F.size());
+  std::vector<int32_t> order(F.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::vector<Eigen::Vector3f> centroid(F.size());
+  for (int i = 0; i < n; ++i) {
+    const auto& f = F[size_t(i)];
+    centroid[size_t(i)] = (V[size_t(f[0])] + V[size_t(f[1])] + V[size_t(f[2])]) / 3.0f;
   }
-  shape->setMargin(kShapeMargin);
-  return shape;
+  g->nodes.reserve(size_t(2 * (n / kLeafSize + 1)));
+  g->nodes.emplace_back();
+  struct Task {
+    int node, begin, end;
+  };
+  std::vector<Task> tasks{{0, 0, n}};
+  while (!tasks.empty()) {
+    const Task t = tasks.back();
+    tasks.pop_back();
+    Eigen::Vector3f lo = Eigen::Vector3f::Constant(std::numeric_limits<float>::max()), hi = -lo;
+    Eigen::Vector3f clo = lo, chi = hi;
+    for (int i = t.begin; i < t.end; ++i) {
+      const auto& f = F[size_t(order[size_t(i)])];
+      for (int k = 0; k < 3; ++k) {
+        lo = lo.cwiseMin(V[size_t(f[k])]);
+        hi = hi.cwiseMax(V[size_t(f[k])]);
+      }
+      clo = clo.cwiseMin(centroid[size_t(order[size_t(i)])]);
+      chi = chi.cwiseMax(centroid[size_t(order[size_t(i)])]);
+    }
+    auto& node = g->nodes[size_t(t.node)];
+    node.lo = lo;
+    node.hi = hi;
+    if (t.end - t.begin <= kLeafSize) {
+      node.index = t.begin;
+      node.count = t.end - t.begin;
+      continue;
+    }
+    int axis = 0;
+    (chi - clo).maxCoeff(&axis);
+    const int mid = (t.begin + t.end) / 2;
+    std::nth_element(order.begin() + t.begin, order.begin() + mid, order.begin() + t.end,
+                     [&](int32_t a, int32_t b) { return centroid[size_t(a)][axis] < centroid[size_t(b)][axis]; });
+    const int children = int(g->nodes.size());
+    node.index = children;
+    node.count = 0;
+    g->nodes.emplace_back();
+    g->nodes.emplace_back();
+    tasks.push_back({children, t.begin, mid});
+    tasks.push_back({children + 1, mid, t.end});
+  }
+  g->tris.resize(size_t(n));
+  for (int i = 0; i < n; ++i) {
+    const auto& f = F[size_t(order[size_t(i)])];
+    g->tris[size_t(i)] = {V[size_t(f[0])], V[size_t(f[1])], V[size_t(f[2])]};
+  }
+  return g;
+}
+
+// A query shape, built once per query: the Bullet shape for GJK and its oriented bounding box.
+struct Probe {
+  const QueryShape* source = nullptr;
+  std::shared_ptr<const btConvexShape> shape;
+  bool is_sphere = false;
+  bool is_box = false;
+  double radius = 0;                 ///< sphere
+  Eigen::Vector3d obb_center_shape;  ///< the bounding box in the shape frame
+  Eigen::Vector3d obb_half;
+};
+
+// The probe in one body's frame.
+struct Posed {
+  Eigen::Matrix3f R;  ///< columns: the box axes in the body frame
+  Eigen::Vector3f c;  ///< box centre in the body frame
+  Eigen::Vector3f h;  ///< box half extents
+  Eigen::Vector3f lo, hi;  ///< axis-aligned box of the oriented one
+  Eigen::Vector3d sphere_center;
+  btTransform T_body_shape;
+  // The last separating axis GJK found (unit, from the shape towards the triangle) and the
+  // shape's extent along it: any node or triangle beyond it along the axis is at least that far.
+  bool has_axis = false;
+  Eigen::Vector3f axis = Eigen::Vector3f::Zero();
+  float axis_support = 0;
+};
+
+Posed pose_probe(const Probe& p, const Transform& T_body_shape) {
+  Posed q;
+  q.R = T_body_shape.rotation().cast<float>();
+  q.c = (T_body_shape * p.obb_center_shape).cast<float>();
+  q.h = p.obb_half.cast<float>();
+  const Eigen::Vector3f e = q.R.cwiseAbs() * q.h;
+  q.lo = q.c - e;
+  q.hi = q.c + e;
+  q.sphere_center = T_body_shape.translation();
+  q.T_body_shape = to_bt(T_body_shape);
+  return q;
+}
+
+// Gap between two axis-aligned boxes (0 when they overlap): a lower bound of their distance.
+float box_gap(const Eigen::Vector3f& alo, const Eigen::Vector3f& ahi, const Eigen::Vector3f& blo, const Eigen::Vector3f& bhi) {
+  const Eigen::Vector3f d = (alo - bhi).cwiseMax(blo - ahi).cwiseMax(0.0f);
+  return d.norm();
+}
+
+// Lower bound of the distance between the probe's oriented box and an axis-aligned box.
+float node_bound(const Posed& q, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi) {
+  float gap = box_gap(q.lo, q.hi, lo, hi);
+  const Eigen::Vector3f nc = 0.5f * (lo + hi), nh = 0.5f * (hi - lo);
+  const Eigen::Vector3f d = q.R.transpose() * (nc - q.c);
+  const Eigen::Vector3f r = q.R.cwiseAbs().transpose() * nh;
+  for (int i = 0; i < 3; ++i) gap = std::max(gap, std::abs(d[i]) - q.h[i] - r[i]);
+  if (q.has_axis) gap = std::max(gap, q.axis.dot(nc) - q.axis.cwiseAbs().dot(nh) - q.axis_support);
+  return gap;
+}
+
+// Lower bound of the distance between the probe's oriented box and a triangle: the largest gap
+// over the 13 separating axes (box faces, triangle normal, box edges x triangle edges).
+float triangle_bound(const Posed& q, const Geometry::Tri& t) {
+  Eigen::Vector3f tlo = t.a.cwiseMin(t.b).cwiseMin(t.c), thi = t.a.cwiseMax(t.b).cwiseMax(t.c);
+  float gap = box_gap(q.lo, q.hi, tlo, thi);
+  if (q.has_axis) gap = std::max(gap, std::min({q.axis.dot(t.a), q.axis.dot(t.b), q.axis.dot(t.c)}) - q.axis_support);
+  const Eigen::Matrix3f Rt = q.R.transpose();
+  const Eigen::Vector3f v0 = Rt * (t.a - q.c), v1 = Rt * (t.b - q.c), v2 = Rt * (t.c - q.c);
+  const auto& h = q.h;
+  // Box faces.
+  for (int i = 0; i < 3; ++i) {
+    const float mn = std::min({v0[i], v1[i], v2[i]}), mx = std::max({v0[i], v1[i], v2[i]});
+    gap = std::max(gap, std::max(mn - h[i], -h[i] - mx));
+  }
+  const auto axis_gap = [&](const Eigen::Vector3f& a) {
+    const float p0 = a.dot(v0), p1 = a.dot(v1), p2 = a.dot(v2);
+    const float r = h.dot(a.cwiseAbs());
+    const float sep = std::max(std::min({p0, p1, p2}) - r, -r - std::max({p0, p1, p2}));
+    if (sep <= 0) return sep;
+    const float n = a.norm();
+    return n > 1e-12f ? sep / n : 0.0f;
+  };
+  const Eigen::Vector3f e0 = v1 - v0, e1 = v2 - v1, e2 = v0 - v2;
+  gap = std::max(gap, axis_gap(e0.cross(e1)));
+  for (const auto* e : {&e0, &e1, &e2}) {
+    gap = std::max(gap, axis_gap(Eigen::Vector3f(0, -e->z(), e->y())));
+    gap = std::max(gap, axis_gap(Eigen::Vector3f(e->z(), 0, -e->x())));
+    gap = std::max(gap, axis_gap(Eigen::Vector3f(-e->y(), e->x(), 0)));
+  }
+  return gap;
+}
+
+// Closest point on triangle abc to p (Ericson 5.1.5).
+Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return a;
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+  const double denom = 1.0 / (va + vb + vc);
+  return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+// Signed surface distance between the probe and one triangle, with witnesses in the body frame.
+struct Hit {
+  double distance = 0;
+  Eigen::Vector3d on_shape, on_body;
+};
+
+std::optional<Hit> narrow(const Probe& p, Posed& q, const Geometry::Tri& t, double reach) {
+  if (p.is_sphere) {
+    const Eigen::Vector3d a = t.a.cast<double>(), b = t.b.cast<double>(), c = t.c.cast<double>();
+    const Eigen::Vector3d on = closest_on_triangle(q.sphere_center, a, b, c);
+    const Eigen::Vector3d d = q.sphere_center - on;
+    const double centre = d.norm();
+    if (centre - p.radius > reach) return std::nullopt;
+    Eigen::Vector3d n = d / centre;
+    if (!(centre > 1e-12)) n = (b - a).cross(c - a).normalized();  // centre on the triangle
+    return Hit{centre - p.radius, q.sphere_center - n * p.radius, on};
+  }
+  btTriangleShape tri(to_bt(t.a), to_bt(t.b), to_bt(t.c));
+  tri.setMargin(0);
+  btVoronoiSimplexSolver simplex;
+  btGjkEpaPenetrationDepthSolver epa;
+  btGjkPairDetector gjk(p.shape.get(), &tri, &simplex, &epa);
+  btGjkPairDetector::ClosestPointInput in;
+  in.m_transformA = q.T_body_shape;
+  in.m_transformB.setIdentity();
+  btPointCollector out;
+  gjk.getClosestPoints(in, out, nullptr);
+  if (out.m_hasResult && out.m_distance > 0) {
+    // Keep the separating axis: neighbouring triangles are mostly beyond it too.
+    const btVector3 d = -out.m_normalOnBInWorld;
+    const btVector3 local = q.T_body_shape.getBasis().transpose() * d;
+    const btVector3 support = q.T_body_shape * p.shape->localGetSupportingVertex(local);
+    q.has_axis = true;
+    q.axis = Eigen::Vector3f(d.x(), d.y(), d.z());
+    q.axis_support = float(d.dot(support)) + 1e-6f;  // float rounding must not prune a touching triangle
+  }
+  if (!out.m_hasResult || out.m_distance > reach) return std::nullopt;
+  const Eigen::Vector3d on_body = to_eigen(out.m_pointInWorld);
+  return Hit{double(out.m_distance), on_body + to_eigen(out.m_normalOnBInWorld) * double(out.m_distance), on_body};
+}
+
+// Walks the tree: `reach()` is read again after every triangle (distance queries shrink it);
+// `visit(tri)` returns false to stop. `nearest_first` orders children by their lower bound.
+template <typename Reach, typename Visit>
+void traverse(const Geometry& g, Posed& q, bool nearest_first, Reach&& reach, Visit&& visit) {
+  std::array<int32_t, 128> stack{};
+  int top = 0;
+  if (node_bound(q, g.nodes[0].lo, g.nodes[0].hi) > reach()) return;
+  stack[size_t(top++)] = 0;
+  while (top > 0) {
+    const auto& node = g.nodes[size_t(stack[size_t(--top)])];
+    if (node.count > 0) {
+      for (int i = node.index; i < node.index + node.count; ++i) {
+        const auto& t = g.tris[size_t(i)];
+        if (triangle_bound(q, t) > reach()) continue;
+        if (!visit(t)) return;
+      }
+      continue;
+    }
+    const int a = node.index, b = node.index + 1;
+    const float r = reach();
+    const float ga = node_bound(q, g.nodes[size_t(a)].lo, g.nodes[size_t(a)].hi);
+    const float gb = node_bound(q, g.nodes[size_t(b)].lo, g.nodes[size_t(b)].hi);
+    // Push the farther first so the nearer is visited first.
+    const bool a_first = !nearest_first || ga <= gb;
+    const int first = a_first ? a : b, second = a_first ? b : a;
+    const float gfirst = a_first ? ga : gb, gsecond = a_first ? gb : ga;
+    if (gsecond <= r) stack[size_t(top++)] = second;
+    if (gfirst <= r) stack[size_t(top++)] = first;
+  }
+}
+
+struct HullEntry {
+  std::vector<Eigen::Vector3f> points;  ///< as given, to tell hash collisions apart
+  std::shared_ptr<const btConvexShape> shape;
+  Eigen::Vector3d lo, hi;  ///< of the hull as Bullet sees it (margin included), shape frame
+};
+
+uint64_t hash_points(const std::vector<Eigen::Vector3f>& points) {
+  uint64_t h = 1469598103934665603ull ^ points.size();
+  for (const auto& p : points)
+    for (int k = 0; k < 3; ++k) {
+      uint32_t w = 0;
+      std::memcpy(&w, &p[k], sizeof w);
+      h = (h ^ w) * 1099511628211ull;
+    }
+  return h;
 }
 
 bool allowed(const std::vector<AllowedPair>& pairs, const std::string& shape, int64_t body) {
@@ -96,123 +340,204 @@ bool allowed(const std::vector<AllowedPair>& pairs, const std::string& shape, in
   });
 }
 
-// Collects the closest point pair between one query object and one body.
-struct ClosestCallback : btCollisionWorld::ContactResultCallback {
-  const btCollisionObject* query = nullptr;
-  bool found = false;
-  btScalar distance = std::numeric_limits<btScalar>::max();
-  btVector3 on_query, on_body;
+// Ray against a triangle (Moeller-Trumbore): the ray parameter, or a negative number.
+double ray_triangle(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Geometry::Tri& t) {
+  const Eigen::Vector3d a = t.a.cast<double>(), e1 = t.b.cast<double>() - a, e2 = t.c.cast<double>() - a;
+  const Eigen::Vector3d p = d.cross(e2);
+  const double det = e1.dot(p);
+  if (std::abs(det) < 1e-18) return -1;
+  const double inv = 1.0 / det;
+  const Eigen::Vector3d s = o - a;
+  const double u = s.dot(p) * inv;
+  if (u < 0 || u > 1) return -1;
+  const Eigen::Vector3d qv = s.cross(e1);
+  const double v = d.dot(qv) * inv;
+  if (v < 0 || u + v > 1) return -1;
+  return e2.dot(qv) * inv;
+}
 
-  btScalar addSingleResult(btManifoldPoint& cp, const btCollisionObjectWrapper* a, int, int,
-                           const btCollisionObjectWrapper*, int, int) override {
-    if (cp.getDistance() < distance) {
-      found = true;
-      distance = cp.getDistance();
-      const bool query_is_a = a->getCollisionObject() == query;
-      on_query = query_is_a ? cp.getPositionWorldOnA() : cp.getPositionWorldOnB();
-      on_body = query_is_a ? cp.getPositionWorldOnB() : cp.getPositionWorldOnA();
-    }
-    return 0;
-  }
+struct Body {
+  int64_t id = 0;
+  std::shared_ptr<const Geometry> geometry;
+  Transform T_world_body = Transform::Identity();
+  Transform T_body_world = Transform::Identity();
+  Eigen::Vector3f lo, hi;  ///< world-frame bounding box
+  double margin_m = 0.0;
 };
 
 }  // namespace
 
 struct CollisionScene::Impl {
-  btDefaultCollisionConfiguration configuration;
-  btCollisionDispatcher dispatcher{&configuration};
-  btDbvtBroadphase broadphase;
-  btCollisionWorld world{&dispatcher, &broadphase, &configuration};
   std::map<int64_t, Body> bodies;
-  std::map<const TriangleMesh*, std::weak_ptr<MeshEntry>> entries;
+  std::map<const TriangleMesh*, std::weak_ptr<const Geometry>> entries;
+  mutable std::mutex hulls_mutex;
+  mutable std::unordered_map<uint64_t, std::shared_ptr<const HullEntry>> hulls;
 
-  std::shared_ptr<MeshEntry> entry_for(std::shared_ptr<const TriangleMesh> mesh) {
+  std::shared_ptr<const Geometry> entry_for(std::shared_ptr<const TriangleMesh> mesh) {
     if (auto it = entries.find(mesh.get()); it != entries.end())
       if (auto e = it->second.lock()) return e;
-    if (mesh->faces.empty()) throw Error("collision scene: a body mesh has no triangles");
-    mesh->validate();
-    auto e = std::make_shared<MeshEntry>();
-    e->mesh = mesh;
-    btIndexedMesh part;
-    part.m_numTriangles = int(mesh->faces.size());
-    part.m_triangleIndexBase = reinterpret_cast<const unsigned char*>(mesh->faces.data());
-    part.m_triangleIndexStride = sizeof(Eigen::Vector3i);
-    part.m_numVertices = int(mesh->vertices.size());
-    part.m_vertexBase = reinterpret_cast<const unsigned char*>(mesh->vertices.data());
-    part.m_vertexStride = sizeof(Eigen::Vector3f);
-    part.m_indexType = PHY_INTEGER;
-    part.m_vertexType = PHY_FLOAT;
-    e->arrays = std::make_unique<btTriangleIndexVertexArray>();
-    e->arrays->addIndexedMesh(part, PHY_INTEGER);
-    e->shape = std::make_unique<btBvhTriangleMeshShape>(e->arrays.get(), true, true);
-    e->shape->setMargin(0);
-    entries[mesh.get()] = e;
+    const TriangleMesh* key = mesh.get();
+    std::shared_ptr<const Geometry> g = build(std::move(mesh));
+    entries[key] = g;
+    return g;
+  }
+
+  static void place(Body& b, const Transform& T_world_body) {
+    b.T_world_body = T_world_body;
+    b.T_body_world = T_world_body.inverse(Eigen::Isometry);
+    const auto& root = b.geometry->nodes[0];
+    const Eigen::Matrix3f R = T_world_body.rotation().cast<float>();
+    const Eigen::Vector3f c = T_world_body.cast<float>() * (0.5f * (root.lo + root.hi));
+    const Eigen::Vector3f e = R.cwiseAbs() * (0.5f * (root.hi - root.lo));
+    b.lo = c - e;
+    b.hi = c + e;
+  }
+
+  // A hull's Bullet shape, computed once per distinct point set (a robot's links come back with
+  // every query).
+  std::shared_ptr<const HullEntry> hull_for(const QueryShape& s) const {
+    const uint64_t key = hash_points(s.points);
+    {
+      std::lock_guard<std::mutex> lock(hulls_mutex);
+      if (auto it = hulls.find(key); it != hulls.end() && it->second->points == s.points) return it->second;
+    }
+    auto e = std::make_shared<HullEntry>();
+    e->points = s.points;
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (const auto& p : s.points) centroid += p.cast<double>();
+    centroid /= double(s.points.size());
+    auto hull = std::make_shared<btConvexHullShape>();
+    for (const auto& p : s.points) {
+      // Bullet adds a hull's margin outside it: pull the points in by as much.
+      Eigen::Vector3d q = p.cast<double>();
+      const Eigen::Vector3d d = q - centroid;
+      const double n = d.norm();
+      if (n > kShapeMargin) q -= d / n * kShapeMargin;
+      hull->addPoint(btVector3(q.x(), q.y(), q.z()), false);
+    }
+    hull->recalcLocalAabb();
+    hull->optimizeConvexHull();
+    hull->setMargin(kShapeMargin);
+    e->lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::max());
+    e->hi = -e->lo;
+    for (int i = 0; i < hull->getNumPoints(); ++i) {
+      const Eigen::Vector3d v = to_eigen(hull->getUnscaledPoints()[i]);
+      e->lo = e->lo.cwiseMin(v);
+      e->hi = e->hi.cwiseMax(v);
+    }
+    e->lo.array() -= kShapeMargin;
+    e->hi.array() += kShapeMargin;
+    e->shape = std::move(hull);
+    std::lock_guard<std::mutex> lock(hulls_mutex);
+    if (hulls.size() > 4096) hulls.clear();
+    hulls[key] = e;
     return e;
   }
 
-  // Bodies whose bounding box comes within `reach` of the query's.
-  template <typename Fn>
-  void for_near_bodies(const btCollisionObject& query, double reach, Fn&& fn) const {
-    btVector3 qmin, qmax;
-    query.getCollisionShape()->getAabb(query.getWorldTransform(), qmin, qmax);
-    const btVector3 r(reach, reach, reach);
-    for (const auto& [id, body] : bodies) {
-      btVector3 bmin, bmax;
-      body.object->getCollisionShape()->getAabb(body.object->getWorldTransform(), bmin, bmax);
-      if (TestAabbAgainstAabb2(qmin - r, qmax + r, bmin, bmax)) fn(body);
+  Probe make_probe(const QueryShape& s) const {
+    const auto bad = [&](const std::string& what) { return Error("query shape '" + s.name + "': " + what); };
+    if (!finite_pose(s.T_world_shape)) throw bad("pose is not finite");
+    Probe p;
+    p.source = &s;
+    p.obb_center_shape = Eigen::Vector3d::Zero();
+    std::shared_ptr<btConvexShape> shape;
+    switch (s.kind) {
+      case QueryShape::Kind::box:
+        if (!(s.size.allFinite() && s.size.minCoeff() > 0)) throw bad("box size must be positive");
+        shape = std::make_shared<btBoxShape>(btVector3(s.size.x() / 2, s.size.y() / 2, s.size.z() / 2));
+        p.obb_half = s.size / 2;
+        p.is_box = true;
+        break;
+      case QueryShape::Kind::sphere:
+        if (!(std::isfinite(s.radius_m) && s.radius_m > 0)) throw bad("sphere radius must be positive");
+        p.is_sphere = true;
+        p.radius = s.radius_m;
+        p.obb_half = Eigen::Vector3d::Constant(s.radius_m);
+        return p;
+      case QueryShape::Kind::cylinder:
+        if (!(std::isfinite(s.radius_m) && s.radius_m > 0 && std::isfinite(s.length_m) && s.length_m > 0))
+          throw bad("cylinder radius and length must be positive");
+        shape = std::make_shared<btCylinderShapeZ>(btVector3(s.radius_m, s.radius_m, s.length_m / 2));
+        p.obb_half = Eigen::Vector3d(s.radius_m, s.radius_m, s.length_m / 2);
+        break;
+      case QueryShape::Kind::capsule: {
+        if (!(std::isfinite(s.radius_m) && s.radius_m > 0 && std::isfinite(s.length_m) && s.length_m >= 0))
+          throw bad("capsule radius must be positive and length not negative");
+        auto capsule = std::make_shared<btCapsuleShapeZ>(s.radius_m, s.length_m);
+        p.obb_half = Eigen::Vector3d(s.radius_m, s.radius_m, s.length_m / 2 + s.radius_m);
+        p.shape = std::move(capsule);  // a capsule is all margin: keep Bullet's
+        p.obb_half.array() += 1e-6;
+        return p;
+      }
+      case QueryShape::Kind::convex_hull: {
+        if (s.points.size() < 4) throw bad("a convex hull needs at least 4 points");
+        for (const auto& q : s.points)
+          if (!q.allFinite()) throw bad("hull point is not finite");
+        const auto hull = hull_for(s);
+        p.shape = hull->shape;
+        p.obb_center_shape = 0.5 * (hull->lo + hull->hi);
+        p.obb_half = 0.5 * (hull->hi - hull->lo);
+        p.obb_half.array() += 1e-6;
+        return p;
+      }
     }
+    shape->setMargin(kShapeMargin);
+    p.shape = std::move(shape);
+    p.obb_half.array() += 1e-6;  // float rounding of the bounds must not prune a touching triangle
+    return p;
   }
 
-  // Closest pair between a query object and a body, if within `threshold`.
-  std::optional<Contact> closest(const std::string& name, btCollisionObject& query, const Body& body, double threshold) {
-    ClosestCallback cb;
-    cb.query = &query;
-    cb.m_closestDistanceThreshold = btScalar(threshold);
-    world.contactPairTest(&query, body.object.get(), cb);
-    if (!cb.found || cb.distance > threshold) return std::nullopt;
-    return Contact{name, body.id, to_eigen(cb.on_query), to_eigen(cb.on_body), double(cb.distance) - body.margin_m};
+  // World-frame bounding box of a probe.
+  static void world_box(const Probe& p, Eigen::Vector3f& lo, Eigen::Vector3f& hi) {
+    const auto& T = p.source->T_world_shape;
+    const Eigen::Vector3d c = T * p.obb_center_shape;
+    const Eigen::Vector3d e = T.rotation().cwiseAbs() * p.obb_half;
+    lo = (c - e).cast<float>();
+    hi = (c + e).cast<float>();
+  }
+
+  static Contact to_world(const std::string& shape, const Body& b, const Hit& h) {
+    return Contact{shape, b.id, b.T_world_body * h.on_shape, b.T_world_body * h.on_body, h.distance - b.margin_m};
   }
 };
 
 CollisionScene::CollisionScene() : impl_(std::make_unique<Impl>()) {}
 
-CollisionScene::~CollisionScene() {
-  for (auto& [id, body] : impl_->bodies) impl_->world.removeCollisionObject(body.object.get());
+CollisionScene::~CollisionScene() = default;
+
+std::shared_ptr<const BodyGeometry> CollisionScene::build_geometry(std::shared_ptr<const TriangleMesh> mesh) {
+  if (!mesh) throw Error("collision scene: a body has no mesh");
+  return build(std::move(mesh));
 }
 
 void CollisionScene::set_body(int64_t id, std::shared_ptr<const TriangleMesh> mesh, const Transform& T_world_body, double margin_m) {
   if (!mesh) throw Error("collision scene: body " + std::to_string(id) + " has no mesh");
   if (!finite_pose(T_world_body)) throw Error("collision scene: body " + std::to_string(id) + " has a non-finite pose");
+  set_body(id, impl_->entry_for(std::move(mesh)), T_world_body, margin_m);
+}
+
+void CollisionScene::set_body(int64_t id, std::shared_ptr<const BodyGeometry> geometry, const Transform& T_world_body, double margin_m) {
+  if (!geometry) throw Error("collision scene: body " + std::to_string(id) + " has no geometry");
+  if (!finite_pose(T_world_body)) throw Error("collision scene: body " + std::to_string(id) + " has a non-finite pose");
   if (!(std::isfinite(margin_m) && margin_m >= 0))
     throw Error("collision scene: body " + std::to_string(id) + " has a negative or non-finite margin");
-  auto entry = impl_->entry_for(std::move(mesh));
-  remove(id);
+  impl_->entries[geometry->mesh.get()] = geometry;  // reused when the same mesh comes again
   Body body;
   body.id = id;
-  body.entry = entry;
+  body.geometry = std::move(geometry);
   body.margin_m = margin_m;
-  body.object = std::make_unique<btCollisionObject>();
-  body.object->setCollisionShape(entry->shape.get());
-  body.object->setWorldTransform(to_bt(T_world_body));
-  impl_->world.addCollisionObject(body.object.get());
-  impl_->bodies.emplace(id, std::move(body));
+  Impl::place(body, T_world_body);
+  impl_->bodies[id] = std::move(body);
 }
 
 void CollisionScene::set_pose(int64_t id, const Transform& T_world_body) {
   auto it = impl_->bodies.find(id);
   if (it == impl_->bodies.end()) throw Error("collision scene: no body " + std::to_string(id));
   if (!finite_pose(T_world_body)) throw Error("collision scene: body " + std::to_string(id) + " has a non-finite pose");
-  it->second.object->setWorldTransform(to_bt(T_world_body));
-  impl_->world.updateSingleAabb(it->second.object.get());
+  Impl::place(it->second, T_world_body);
 }
 
-bool CollisionScene::remove(int64_t id) {
-  auto it = impl_->bodies.find(id);
-  if (it == impl_->bodies.end()) return false;
-  impl_->world.removeCollisionObject(it->second.object.get());
-  impl_->bodies.erase(it);
-  return true;
-}
+bool CollisionScene::remove(int64_t id) { return impl_->bodies.erase(id) > 0; }
 
 bool CollisionScene::contains(int64_t id) const { return impl_->bodies.count(id) > 0; }
 
@@ -224,26 +549,36 @@ std::vector<int64_t> CollisionScene::bodies() const {
 
 size_t CollisionScene::triangle_count() const {
   size_t n = 0;
-  for (const auto& [id, body] : impl_->bodies) n += body.entry->mesh->faces.size();
+  for (const auto& [id, body] : impl_->bodies) n += body.geometry->tris.size();
   return n;
 }
 
-CollisionResult CollisionScene::check(const std::vector<QueryShape>& shapes, const std::vector<AllowedPair>& allowed_pairs) const {
+CollisionResult CollisionScene::check(const std::vector<QueryShape>& shapes, const std::vector<AllowedPair>& allowed_pairs,
+                                      const CheckOptions& options) const {
+  std::vector<Probe> probes;
+  probes.reserve(shapes.size());
+  for (const auto& s : shapes) probes.push_back(impl_->make_probe(s));  // all validated before any work
   CollisionResult result;
-  for (const auto& s : shapes) {
-    auto shape = make_shape(s);
-    btCollisionObject query;
-    query.setCollisionShape(shape.get());
-    query.setWorldTransform(to_bt(s.T_world_shape));
-    double reach = 0;
-    for (const auto& [id, body] : impl_->bodies) reach = std::max(reach, body.margin_m);
-    impl_->for_near_bodies(query, reach, [&](const Body& body) {
-      if (allowed(allowed_pairs, s.name, body.id)) return;
-      if (auto c = impl_->closest(s.name, query, body, body.margin_m); c && c->distance_m <= 0) {
-        result.in_collision = true;
-        result.contacts.push_back(*c);
-      }
-    });
+  for (const auto& p : probes) {
+    Eigen::Vector3f lo, hi;
+    Impl::world_box(p, lo, hi);
+    for (const auto& [id, body] : impl_->bodies) {
+      if (box_gap(lo, hi, body.lo, body.hi) > float(body.margin_m)) continue;
+      if (allowed(allowed_pairs, p.source->name, body.id)) continue;
+      Posed q = pose_probe(p, body.T_body_world * p.source->T_world_shape);
+      const double reach = body.margin_m;
+      std::optional<Hit> best;
+      traverse(*body.geometry, q, false, [&] { return float(reach); }, [&](const BodyGeometry::Tri& t) {
+        const auto h = narrow(p, q, t, reach);
+        if (!h) return true;
+        if (!best || h->distance < best->distance) best = h;
+        return options.deepest_contacts;
+      });
+      if (!best) continue;
+      result.in_collision = true;
+      result.contacts.push_back(Impl::to_world(p.source->name, body, *best));
+      if (options.stop_at_first) return result;
+    }
   }
   return result;
 }
@@ -251,24 +586,37 @@ CollisionResult CollisionScene::check(const std::vector<QueryShape>& shapes, con
 DistanceResult CollisionScene::distance(const std::vector<QueryShape>& shapes, double max_distance_m,
                                         const std::vector<AllowedPair>& allowed_pairs) const {
   if (!(std::isfinite(max_distance_m) && max_distance_m > 0)) throw Error("distance query: max distance must be positive");
+  std::vector<Probe> probes;
+  probes.reserve(shapes.size());
+  for (const auto& s : shapes) probes.push_back(impl_->make_probe(s));
   DistanceResult result;
   result.distance_m = max_distance_m;
-  for (const auto& s : shapes) {
-    auto shape = make_shape(s);
-    btCollisionObject query;
-    query.setCollisionShape(shape.get());
-    query.setWorldTransform(to_bt(s.T_world_shape));
-    double margin = 0;
-    for (const auto& [id, body] : impl_->bodies) margin = std::max(margin, body.margin_m);
-    impl_->for_near_bodies(query, max_distance_m + margin, [&](const Body& body) {
-      if (allowed(allowed_pairs, s.name, body.id)) return;
-      // Only pairs nearer than the best so far can improve it.
-      const double threshold = std::min(max_distance_m, result.distance_m) + body.margin_m;
-      if (auto c = impl_->closest(s.name, query, body, threshold); c && c->distance_m < result.distance_m) {
-        result.distance_m = c->distance_m;
-        result.closest = *c;
-      }
-    });
+  for (const auto& p : probes) {
+    Eigen::Vector3f lo, hi;
+    Impl::world_box(p, lo, hi);
+    // Nearer bodies first, so the reach shrinks early.
+    std::vector<std::pair<float, const Body*>> near;
+    for (const auto& [id, body] : impl_->bodies) {
+      const float gap = box_gap(lo, hi, body.lo, body.hi);
+      if (gap - body.margin_m > max_distance_m || allowed(allowed_pairs, p.source->name, body.id)) continue;
+      near.emplace_back(gap - float(body.margin_m), &body);
+    }
+    std::sort(near.begin(), near.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (const auto& [gap, body] : near) {
+      if (gap > result.distance_m) break;
+      Posed q = pose_probe(p, body->T_body_world * p.source->T_world_shape);
+      // Only triangles nearer than the best so far can improve it (raw surface distance).
+      const auto reach = [&] { return result.distance_m + body->margin_m; };
+      traverse(*body->geometry, q, true, [&] { return float(reach()); }, [&](const BodyGeometry::Tri& t) {
+        const auto h = narrow(p, q, t, reach());
+        if (h && h->distance - body->margin_m < result.distance_m) {
+          result.distance_m = h->distance - body->margin_m;
+          result.closest = Impl::to_world(p.source->name, *body, *h);
+        }
+        return result.distance_m >= 0;
+      });
+      if (result.distance_m < 0) return result;  // in collision: see the header
+    }
   }
   return result;
 }
@@ -277,18 +625,51 @@ RayHit CollisionScene::raycast(const Eigen::Vector3d& origin, const Eigen::Vecto
   if (!origin.allFinite() || !direction.allFinite() || direction.norm() == 0)
     throw Error("ray cast: the origin and direction must be finite and the direction non-zero");
   if (!(std::isfinite(max_range_m) && max_range_m > 0)) throw Error("ray cast: max range must be positive");
-  const Eigen::Vector3d to = origin + direction.normalized() * max_range_m;
-  const btVector3 a(origin.x(), origin.y(), origin.z()), b(to.x(), to.y(), to.z());
-  btCollisionWorld::ClosestRayResultCallback cb(a, b);
-  impl_->world.rayTest(a, b, cb);
+  const Eigen::Vector3d dir_world = direction.normalized();
   RayHit hit;
-  if (!cb.hasHit()) return hit;
-  hit.hit = true;
-  for (const auto& [id, body] : impl_->bodies)
-    if (body.object.get() == cb.m_collisionObject) hit.body = id;
-  hit.point = to_eigen(cb.m_hitPointWorld);
-  hit.normal = to_eigen(cb.m_hitNormalWorld).normalized();
-  hit.distance_m = (hit.point - origin).norm();
+  double best = max_range_m;
+  for (const auto& [id, body] : impl_->bodies) {
+    const Eigen::Vector3d o = body.T_body_world * origin, d = body.T_body_world.linear() * dir_world;
+    const Eigen::Vector3d inv = d.cwiseInverse();
+    const auto slab = [&](const Eigen::Vector3f& lo, const Eigen::Vector3f& hi) {
+      double t0 = 0, t1 = best;
+      for (int k = 0; k < 3; ++k) {
+        double a = (double(lo[k]) - o[k]) * inv[k], b = (double(hi[k]) - o[k]) * inv[k];
+        if (a > b) std::swap(a, b);
+        if (std::isnan(a)) a = -std::numeric_limits<double>::infinity();  // parallel, origin on the slab
+        if (std::isnan(b)) b = std::numeric_limits<double>::infinity();
+        t0 = std::max(t0, a);
+        t1 = std::min(t1, b);
+      }
+      return t0 <= t1 + 1e-9;
+    };
+    const auto& g = *body.geometry;
+    std::array<int32_t, 128> stack{};
+    int top = 0;
+    if (slab(g.nodes[0].lo, g.nodes[0].hi)) stack[size_t(top++)] = 0;
+    while (top > 0) {
+      const auto& node = g.nodes[size_t(stack[size_t(--top)])];
+      if (!slab(node.lo, node.hi)) continue;
+      if (node.count == 0) {
+        stack[size_t(top++)] = node.index;
+        stack[size_t(top++)] = node.index + 1;
+        continue;
+      }
+      for (int i = node.index; i < node.index + node.count; ++i) {
+        const auto& t = g.tris[size_t(i)];
+        const double s = ray_triangle(o, d, t);
+        if (s < 0 || s > best) continue;
+        best = s;
+        Eigen::Vector3d n = (t.b - t.a).cross(t.c - t.a).cast<double>().normalized();
+        if (n.dot(d) > 0) n = -n;  // facing the ray's origin
+        hit.hit = true;
+        hit.body = id;
+        hit.distance_m = s;
+        hit.point = body.T_world_body * (o + d * s);
+        hit.normal = body.T_world_body.linear() * n;
+      }
+    }
+  }
   return hit;
 }
 

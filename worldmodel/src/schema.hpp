@@ -57,6 +57,20 @@ CREATE TABLE multimesh_members (
 );
 CREATE INDEX multimesh_members_by_mesh ON multimesh_members (mesh_id);
 )sql",
+      // 1 -> 2: the blocks of grid objects (perception/integration), one row per block, sealed
+      // with their size and CRC-32 like the blobs.
+      R"sql(
+CREATE TABLE grid_blocks (
+  grid_id INTEGER NOT NULL REFERENCES objects(id) ON DELETE CASCADE,
+  x INTEGER NOT NULL,
+  y INTEGER NOT NULL,
+  z INTEGER NOT NULL,
+  size INTEGER NOT NULL,
+  crc32 INTEGER NOT NULL,
+  data BLOB NOT NULL,
+  PRIMARY KEY (grid_id, x, y, z)
+);
+)sql",
   };
   return all;
 }

@@ -384,6 +384,47 @@ std::vector<MultiMeshMember> Workspace::members(ObjectId multimesh) const {
   return out;
 }
 
+std::optional<SqlBlob> Workspace::grid_block(ObjectId grid, const std::array<int32_t, 3>& key) const {
+  auto rows = db_->query("SELECT size, crc32, data FROM grid_blocks WHERE grid_id = ? AND x = ? AND y = ? AND z = ?",
+                         {grid, int64_t{key[0]}, int64_t{key[1]}, int64_t{key[2]}});
+  if (rows.empty()) return std::nullopt;
+  auto data = std::move(std::get<SqlBlob>(rows[0][2]));
+  if (static_cast<int64_t>(data.size()) != as_int(rows[0][0]) || io::crc32_of(data) != static_cast<uint32_t>(as_int(rows[0][1])))
+    throw Error(path_of(grid) + " (ID " + std::to_string(grid) + "): grid block (" + std::to_string(key[0]) + ", " +
+                std::to_string(key[1]) + ", " + std::to_string(key[2]) + ") fails its size or checksum check");
+  return data;
+}
+
+std::vector<std::array<int32_t, 3>> Workspace::grid_block_keys(ObjectId grid) const {
+  std::vector<std::array<int32_t, 3>> out;
+  for (const auto& r : db_->query("SELECT x, y, z FROM grid_blocks WHERE grid_id = ? ORDER BY x, y, z", {grid}))
+    out.push_back({static_cast<int32_t>(as_int(r[0])), static_cast<int32_t>(as_int(r[1])), static_cast<int32_t>(as_int(r[2]))});
+  return out;
+}
+
+std::pair<size_t, size_t> Workspace::grid_block_totals(ObjectId grid) const {
+  const auto rows = db_->query("SELECT COUNT(*), COALESCE(SUM(size), 0) FROM grid_blocks WHERE grid_id = ?", {grid});
+  return {static_cast<size_t>(as_int(rows[0][0])), static_cast<size_t>(as_int(rows[0][1]))};
+}
+
+void Workspace::put_grid_block(ObjectId grid, const std::array<int32_t, 3>& key, const SqlBlob& data) {
+  write([&] {
+    db_->query("INSERT OR REPLACE INTO grid_blocks (grid_id, x, y, z, size, crc32, data) VALUES (?, ?, ?, ?, ?, ?, ?)",
+               {grid, int64_t{key[0]}, int64_t{key[1]}, int64_t{key[2]}, static_cast<int64_t>(data.size()),
+                static_cast<int64_t>(io::crc32_of(data)), data});
+  });
+}
+
+void Workspace::add_provenance_input(ObjectId id, ObjectId input) {
+  write([&] {
+    if (db_->query("SELECT 1 FROM provenance WHERE object_id = ?", {id}).empty())
+      throw Error(path_of(id) + " (ID " + std::to_string(id) + ") has no provenance to add an input to");
+    get(input);
+    const auto rows = db_->query("SELECT COALESCE(MAX(position) + 1, 0) FROM provenance_inputs WHERE object_id = ?", {id});
+    db_->query("INSERT INTO provenance_inputs (object_id, position, input_id) VALUES (?, ?, ?)", {id, as_int(rows[0][0]), input});
+  });
+}
+
 ObjectId Workspace::mkdir(const std::string& path) {
   validate_path(path);
   ObjectId cur = root();
@@ -591,6 +632,17 @@ CheckReport Workspace::check() const {
     } catch (const Error& e) {
       report.problems.push_back(e.what());
     }
+  }
+  for (const auto& r : db_->query("SELECT b.grid_id, b.x, b.y, b.z, b.size, b.crc32, b.data, o.kind FROM grid_blocks b "
+                                  "LEFT JOIN objects o ON o.id = b.grid_id")) {
+    ++report.blobs;
+    const auto& data = std::get<SqlBlob>(r[6]);
+    const std::string where = "object " + std::to_string(as_int(r[0])) + " grid block (" + std::to_string(as_int(r[1])) + ", " +
+                              std::to_string(as_int(r[2])) + ", " + std::to_string(as_int(r[3])) + ")";
+    if (!std::holds_alternative<std::string>(r[7]) || as_text(r[7]) != "grid")
+      report.problems.push_back(where + ": the object is not a grid");
+    if (static_cast<int64_t>(data.size()) != as_int(r[4]) || io::crc32_of(data) != static_cast<uint32_t>(as_int(r[5])))
+      report.problems.push_back(where + ": checksum or size mismatch");
   }
   return report;
 }

@@ -6,6 +6,9 @@
 #include <functional>
 #include <set>
 
+#include <sys/resource.h>
+#include <unistd.h>
+
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/mesh_format.hpp"
 #include "artisan/perception/kdtree.hpp"
@@ -54,16 +57,18 @@ ObjectId first_version(const Workspace& ws, const ObjectInfo& info) {
   return info.previous_version ? ws.versions(info.id).front().id : info.id;
 }
 
+using PlacedMesh = std::pair<std::shared_ptr<const TriangleMesh>, Transform>;
+
 // Removes the triangles whose three vertices all lie within `distance` of the objects' surfaces
 // (their vertices, with the half edge length of each model added), and unused vertices.
-TriangleMesh cut_out(const TriangleMesh& environment, const std::vector<const SceneObject*>& objects, double distance) {
+TriangleMesh cut_out(const TriangleMesh& environment, const std::vector<PlacedMesh>& objects, double distance) {
   if (objects.empty()) return environment;
   std::vector<Eigen::Vector3f> points;
   double reach = distance;
-  for (const auto* o : objects) {
-    const Eigen::Matrix4f T = o->T_world_object.matrix().cast<float>();
-    for (const auto& v : o->mesh->vertices) points.push_back((T * v.homogeneous()).head<3>());
-    reach = std::max(reach, distance + 0.5 * o->mesh->median_edge_length());
+  for (const auto& [mesh, T_world_object] : objects) {
+    const Eigen::Matrix4f T = T_world_object.matrix().cast<float>();
+    for (const auto& v : mesh->vertices) points.push_back((T * v.homogeneous()).head<3>());
+    reach = std::max(reach, distance + 0.5 * mesh->median_edge_length());
   }
   const KdTree3 tree(std::move(points));
   std::vector<char> near(environment.vertices.size());
@@ -108,6 +113,28 @@ struct WorldModel::Loaded {
   int64_t newest_row = 0;
 };
 
+// The environment less the objects' surface: its inputs, and what the cut made of them.
+struct WorldModel::EnvironmentCut {
+  std::string signature;        ///< of the environment meshes and the objects cut out
+  std::string whole_signature;  ///< of the environment meshes alone
+  std::shared_ptr<const TriangleMesh> whole;
+  std::vector<PlacedMesh> objects;
+  double cutout_distance_m = 0;
+
+  std::shared_ptr<const TriangleMesh> mesh;
+  std::vector<uint8_t> encoded;  ///< with hash and geometry: made only off the main thread
+  std::string hash;
+  std::shared_ptr<const BodyGeometry> geometry;
+
+  void run(bool everything) {
+    mesh = std::make_shared<const TriangleMesh>(cut_out(*whole, objects, cutout_distance_m));
+    if (!everything) return;
+    encoded = io::encode_mesh(*mesh);
+    hash = content_hash(encoded);
+    geometry = CollisionScene::build_geometry(mesh);
+  }
+};
+
 WorldModel::WorldModel(Workspace& workspace, std::string folder, WorldModelOptions options)
     : ws_(workspace), folder_(std::move(folder)), options_(options), collision_(std::make_unique<CollisionScene>()) {
   ws_.folder(folder_);  // throws when it is not a folder
@@ -116,7 +143,7 @@ WorldModel::WorldModel(Workspace& workspace, std::string folder, WorldModelOptio
 
 WorldModel::~WorldModel() = default;
 
-WorldModel::Loaded WorldModel::load() const {
+WorldModel::Loaded WorldModel::load() {
   Loaded out;
   std::vector<ObjectInfo> all;
   walk(ws_, ws_.folder(folder_).id, all);
@@ -196,11 +223,20 @@ WorldModel::Loaded WorldModel::load() const {
     env.version = environment.front().first.version;
     env.path = environment.front().first.path;
     env.margin_m = options_.environment_margin_m;
-    // Rebuilt only when its meshes or the objects cut out of it changed.
-    std::string signature;
-    for (const auto& [info, T] : environment) signature += std::to_string(info.id) + to_row_major_string(T) + ";";
-    for (const auto& s : out.objects) signature += std::to_string(s.version_id) + to_row_major_string(s.T_world_object) + ";";
-    if (signature != environment_signature_ || !environment_mesh_) {
+    // Rebuilt only when its meshes or the objects cut out of it changed; in the background when
+    // only objects did.
+    std::string whole_signature;
+    for (const auto& [info, T] : environment) whole_signature += std::to_string(info.id) + to_row_major_string(T) + ";";
+    auto cut = std::make_shared<EnvironmentCut>();
+    cut->whole_signature = whole_signature;
+    cut->signature = whole_signature + "|";
+    for (const auto& s : out.objects) {
+      cut->signature += std::to_string(s.version_id) + to_row_major_string(s.T_world_object) + ";";
+      cut->objects.emplace_back(s.mesh, s.T_world_object);
+    }
+    cut->cutout_distance_m = options_.cutout_distance_m;
+    bool new_whole = false;
+    if (whole_signature != whole_signature_ || !whole_environment_) {
       TriangleMesh whole;
       for (const auto& [info, T] : environment) {
         TriangleMesh m = ws_.load_mesh(info.id);
@@ -208,11 +244,19 @@ WorldModel::Loaded WorldModel::load() const {
         if (m.normals.empty()) m.compute_vertex_normals();
         whole.append(m);
       }
-      std::vector<const SceneObject*> cut_by;
-      for (const auto& s : out.objects) cut_by.push_back(&s);
-      environment_mesh_ = std::make_shared<const TriangleMesh>(cut_out(whole, cut_by, options_.cutout_distance_m));
-      environment_signature_ = signature;
+      whole_environment_ = std::make_shared<const TriangleMesh>(std::move(whole));
+      whole_signature_ = whole_signature;
+      new_whole = true;
     }
+    cut->whole = whole_environment_;
+    if (cut->signature != environment_signature_ || !environment_mesh_) {
+      if (!options_.environment_in_background || new_whole || !environment_mesh_) {
+        cut->run(false);
+        environment_mesh_ = cut->mesh;
+        environment_signature_ = cut->signature;
+      }
+    }
+    latest_ = std::move(cut);
     env.mesh = environment_mesh_;
     out.objects.insert(out.objects.begin(), std::move(env));
   }
@@ -229,8 +273,9 @@ SceneChanges WorldModel::refresh() {
     now.insert(o.object_id);
     // Encode (and hash) each distinct mesh once.
     const auto old = before.find(o.object_id);
-    if (old != before.end() && old->second->mesh == o.mesh) {
-      o.mesh_hash = old->second->mesh_hash;
+    const auto same_mesh = std::find_if(objects_.begin(), objects_.end(), [&](const SceneObject& x) { return x.mesh == o.mesh; });
+    if (same_mesh != objects_.end()) {
+      o.mesh_hash = same_mesh->mesh_hash;
     } else {
       auto bytes = io::encode_mesh(*o.mesh);
       o.mesh_hash = content_hash(bytes);
@@ -258,8 +303,47 @@ SceneChanges WorldModel::refresh() {
   std::set<std::string> used;
   for (const auto& o : objects_) used.insert(o.mesh_hash);
   std::erase_if(encoded_, [&](const auto& kv) { return !used.count(kv.first); });
-  if (!changes.empty() || revision_ == 0) revision_ = std::max(revision_ + 1, loaded.newest_row);
+  // Row x 1000 + changes since that row (background re-cuts): a fresh start takes the top of its
+  // row's range, above anything an earlier run reached from the same rows.
+  constexpr int64_t kPerRow = 1000;
+  if (revision_ == 0) revision_ = loaded.newest_row * kPerRow + kPerRow - 1;
+  else if (!changes.empty()) revision_ = std::max(revision_ + 1, loaded.newest_row * kPerRow);
   last_changes_ = changes;
+  return changes;
+}
+
+void WorldModel::start_environment_job() {
+  if (job_.valid() || !latest_ || latest_->signature == environment_signature_ || !options_.environment_in_background) return;
+  job_ = std::async(std::launch::async, [cut = *latest_]() mutable {
+    // Below the thread that serves queries and edits: on a busy machine they come first.
+    setpriority(PRIO_PROCESS, pid_t(::gettid()), 10);
+    cut.run(true);
+    return std::make_unique<EnvironmentCut>(std::move(cut));
+  });
+}
+
+SceneChanges WorldModel::poll_environment(bool wait) {
+  SceneChanges changes;
+  if (job_.valid() && (wait || job_.wait_for(std::chrono::seconds(0)) == std::future_status::ready)) {
+    const auto cut = job_.get();
+    // Made from the environment meshes still in use: at least as new as the cut in place.
+    auto env = std::find_if(objects_.begin(), objects_.end(), [](const SceneObject& o) { return o.kind == SceneObject::Kind::environment; });
+    if (cut->whole_signature == whole_signature_ && cut->signature != environment_signature_ && env != objects_.end()) {
+      environment_mesh_ = cut->mesh;
+      environment_signature_ = cut->signature;
+      encoded_.try_emplace(cut->hash, std::move(cut->encoded));
+      env->mesh = cut->mesh;
+      env->mesh_hash = cut->hash;
+      collision_->set_body(env->object_id, cut->geometry, env->T_world_object, env->margin_m);
+      changes.changed.push_back(env->object_id);
+      std::set<std::string> used;
+      for (const auto& o : objects_) used.insert(o.mesh_hash);
+      std::erase_if(encoded_, [&](const auto& kv) { return !used.count(kv.first); });
+      ++revision_;
+      last_changes_ = changes;
+    }
+  }
+  start_environment_job();  // objects moved again meanwhile
   return changes;
 }
 

@@ -1,6 +1,7 @@
 #pragma once
 // The LCM face of the world model: publishes the scene (snapshot on start, after each change
-// and at a low rate; diffs at once), serves meshes in chunks, answers collision, distance and
+// and at a low rate; diffs at once, the environment's re-cut after an edit as a diff of its own
+// when the worker has made it), serves meshes in chunks, answers collision, distance and
 // ray queries and operator commands, re-reads the workspace for changes made by others, and
 // sends a heartbeat. Malformed messages are counted and answered with an error; they never stop
 // the service.
@@ -21,7 +22,9 @@ struct ServiceOptions {
   double heartbeat_period_s = 1.0;
   double poll_period_s = 0.5;           ///< re-read the workspace for others' changes
   std::string service_id;               ///< defaults to "artisand-<pid>"
-  worldmodel::WorldModelOptions world;
+  /// The environment is re-cut on a worker thread after an edit: the edited object's diff goes
+  /// out at once, the environment's as a second diff when its cut is ready.
+  worldmodel::WorldModelOptions world{.environment_in_background = true};
 };
 
 struct ServiceStats {

@@ -1,8 +1,10 @@
 #pragma once
-// The collision scene of a world model (Bullet inside): static bodies (the environment and the
-// recognized objects, exact triangle meshes in bounding-volume hierarchies) checked against
-// query shapes (boxes, spheres, cylinders, capsules, convex hulls) at poses: collision,
-// minimum distance with witness points, and ray casts.
+// The collision scene of a world model: static bodies (the environment and the recognized
+// objects, exact triangle meshes in bounding-volume hierarchies) checked against convex query
+// shapes (boxes, spheres, cylinders, capsules, convex hulls) at poses: collision, minimum
+// distance with witness points, and ray casts. Exact on the triangles: the hierarchy only prunes
+// (oriented-box separating axes, distance lower bounds), and every triangle that may be within
+// reach is decided by an exact narrow phase (point-triangle for spheres, GJK/EPA otherwise).
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -41,9 +43,19 @@ struct Contact {
   double distance_m = 0.0;  ///< signed surface distance, less the body's margin; < 0 is collision
 };
 
+/// How much check() reports; the less, the sooner it can stop.
+struct CheckOptions {
+  /// Report the deepest contact of each colliding (shape, body) pair, which visits every
+  /// triangle within reach; otherwise the first contact found per pair (as deep as that one
+  /// triangle's contact), which stops the pair at its first colliding triangle.
+  bool deepest_contacts = false;
+  /// Stop at the first colliding pair: `in_collision` and one contact (a planner's boolean check).
+  bool stop_at_first = false;
+};
+
 struct CollisionResult {
   bool in_collision = false;
-  std::vector<Contact> contacts;  ///< the deepest contact per (shape, body) pair
+  std::vector<Contact> contacts;  ///< one per colliding (shape, body) pair, see CheckOptions
 };
 
 struct DistanceResult {
@@ -59,6 +71,10 @@ struct RayHit {
   double distance_m = 0.0;
 };
 
+/// A body's triangles in a bounding-volume hierarchy: immutable once built, so it can be built on
+/// another thread and shared by several bodies (a model recognized twice).
+class BodyGeometry;
+
 class CollisionScene {
  public:
   CollisionScene();
@@ -71,6 +87,11 @@ class CollisionScene {
   /// passing the same mesh object again (e.g. a model recognized twice) reuses it.
   /// Throws artisan::Error for a mesh without faces or with non-finite vertices.
   void set_body(int64_t id, std::shared_ptr<const TriangleMesh> mesh, const Transform& T_world_body, double margin_m = 0.0);
+  /// The same with a hierarchy built beforehand (see build_geometry()).
+  void set_body(int64_t id, std::shared_ptr<const BodyGeometry> geometry, const Transform& T_world_body, double margin_m = 0.0);
+  /// Builds the hierarchy over `mesh` (in the body frame); touches no scene, so any thread may
+  /// call it. Throws artisan::Error like set_body().
+  static std::shared_ptr<const BodyGeometry> build_geometry(std::shared_ptr<const TriangleMesh> mesh);
   /// Moves a body without rebuilding anything. Throws for an unknown ID.
   void set_pose(int64_t id, const Transform& T_world_body);
   /// Returns false when there was no such body.
@@ -82,8 +103,13 @@ class CollisionScene {
   /// Which of `shapes` touch or penetrate a body closer than its margin (allowed pairs skipped).
   /// Throws artisan::Error naming the shape when a shape is malformed (non-positive size,
   /// non-finite pose, fewer than 4 hull points).
-  CollisionResult check(const std::vector<QueryShape>& shapes, const std::vector<AllowedPair>& allowed = {}) const;
-  /// The smallest distance between any of `shapes` and any body, up to `max_distance_m`.
+  CollisionResult check(const std::vector<QueryShape>& shapes, const std::vector<AllowedPair>& allowed = {},
+                        const CheckOptions& options = {}) const;
+  /// The smallest distance between any of `shapes` and any body (less the body's margin), up to
+  /// `max_distance_m`; the search prunes by the best distance found so far. When a shape
+  /// penetrates a body (or comes within its margin) the search stops there: a negative distance
+  /// is that contact's depth, not necessarily the deepest (check() with deepest_contacts gives
+  /// the deepest per pair; searching for it costs an EPA per overlapping triangle).
   DistanceResult distance(const std::vector<QueryShape>& shapes, double max_distance_m,
                           const std::vector<AllowedPair>& allowed = {}) const;
   /// The first body a ray from `origin` along `direction` meets within `max_range_m`.

@@ -1,6 +1,8 @@
 #pragma once
 // The workspace: everything a user makes, as a tree of folders like a file explorer, kept in
 // an SQL database with the parameters and inputs that made each object (provenance).
+#include <array>
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -92,7 +94,7 @@ void validate_name(const std::string& name);
 
 class Workspace {
  public:
-  static constexpr int kSchemaVersion = 1;
+  static constexpr int kSchemaVersion = 2;  ///< 2: grid blocks
 
   /// A new workspace file; throws artisan::Error when the file exists.
   static Workspace create(const std::filesystem::path& path);
@@ -123,6 +125,12 @@ class Workspace {
   RangeImage load_image(ObjectId id) const;
   TriangleMesh load_mesh(ObjectId id) const;   ///< a mesh or a model's mesh
   std::vector<MultiMeshMember> members(ObjectId multimesh) const;
+  /// The bytes of one block of a grid object (block coordinates x, y, z), checked against their
+  /// stored size and CRC-32; nullopt when the block has none. See grid_store.hpp.
+  std::optional<SqlBlob> grid_block(ObjectId grid, const std::array<int32_t, 3>& key) const;
+  std::vector<std::array<int32_t, 3>> grid_block_keys(ObjectId grid) const;
+  /// Blocks and their total bytes [bytes].
+  std::pair<size_t, size_t> grid_block_totals(ObjectId grid) const;
 
   // --- writing: each call is one transaction; write() groups several into one ---------------
   void write(const std::function<void()>& fn);
@@ -134,6 +142,12 @@ class Workspace {
   int64_t add_member(ObjectId multimesh, const MultiMeshMember& member);
   void set_member_transform(int64_t member_id, const Transform& T_parent_member);
   void set_metadata(ObjectId id, const nlohmann::json& metadata);
+  /// Stores (inserts or replaces) one block of a grid object. Callers that write many blocks
+  /// group them in one write() (the grid operations in grid_store.hpp do).
+  void put_grid_block(ObjectId grid, const std::array<int32_t, 3>& key, const SqlBlob& data);
+  /// Appends `input` to the provenance inputs of `id` (a grid that gained a mesh); throws when
+  /// `id` has no provenance or `input` does not exist.
+  void add_provenance_input(ObjectId id, ObjectId input);
   /// Refuses (naming them) when other objects were derived from `id` or a folder is not empty,
   /// unless `recursive`, which removes them too. Removes every version.
   void remove(ObjectId id, bool recursive);

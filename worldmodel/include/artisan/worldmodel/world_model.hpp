@@ -5,7 +5,13 @@
 // grasp frames; and its collision scene. Operator edits (correct or accept a pose, attach,
 // detach, delete, add) are stored in the workspace as new versions with author and time, and
 // refresh() rebuilds only what changed.
+//
+// The environment's cut (and its encoding, hash and hierarchy) depends on every object's pose,
+// and takes seconds for a million triangles. With `environment_in_background`, an edit updates
+// the objects at once and leaves the re-cut to a worker thread; poll_environment() installs it
+// as a change of its own. Until then the environment stays as cut before the edit.
 #include <cstdint>
+#include <future>
 #include <map>
 #include <memory>
 #include <optional>
@@ -44,6 +50,9 @@ struct WorldModelOptions {
   double cutout_distance_m = 0.004;  ///< environment triangles this near a recognized object are its surface
   double object_margin_m = 0.0;      ///< collision margin of recognized objects [m]
   double environment_margin_m = 0.0; ///< collision margin of the environment [m]
+  /// Re-cut the environment on a worker thread when only objects moved (see poll_environment());
+  /// otherwise refresh() and every edit re-cut it before returning.
+  bool environment_in_background = false;
 };
 
 struct SceneChanges {
@@ -61,7 +70,8 @@ class WorldModel {
   WorldModel& operator=(const WorldModel&) = delete;
 
   const std::string& folder() const { return folder_; }
-  /// Bumps on every change; starts from the workspace's newest row so it grows across restarts.
+  /// Bumps on every change (edits, others' changes, background re-cuts): the workspace's newest
+  /// row x 1000 plus the changes since, so it grows across restarts.
   int64_t revision() const { return revision_; }
   const std::vector<SceneObject>& objects() const { return objects_; }
   const SceneObject* find(ObjectId object_id) const;
@@ -71,8 +81,15 @@ class WorldModel {
 
   /// Re-reads the folder; updates the scene and the collision scene where they changed.
   SceneChanges refresh();
-  /// What the last refresh (or edit) changed.
+  /// What the last refresh (or edit, or installed environment) changed.
   const SceneChanges& last_changes() const { return last_changes_; }
+  /// True while an environment re-cut is under way on the worker thread.
+  bool environment_pending() const { return job_.valid(); }
+  /// Installs a finished background re-cut of the environment (waits for it when `wait`):
+  /// the environment's mesh, hash and collision body change and the revision bumps. Returns
+  /// what changed (nothing when no re-cut had finished). Starts the next re-cut when objects
+  /// moved again meanwhile.
+  SceneChanges poll_environment(bool wait = false);
 
   // --- operator edits: each stored as a new version (author, time, action), then refreshed ---
   ObjectId correct_pose(ObjectId object_id, const Transform& T_world_object, const std::string& author);
@@ -87,7 +104,9 @@ class WorldModel {
 
  private:
   struct Loaded;
-  Loaded load() const;
+  struct EnvironmentCut;
+  Loaded load();
+  void start_environment_job();
   ObjectId edit(ObjectId object_id, const std::string& action, const std::string& author, nlohmann::json changes);
   const SceneObject& object_or_throw(ObjectId object_id) const;
 
@@ -100,8 +119,12 @@ class WorldModel {
   std::unique_ptr<CollisionScene> collision_;
   mutable std::map<ObjectId, std::shared_ptr<const TriangleMesh>> model_meshes_;  ///< by model row
   std::map<std::string, std::vector<uint8_t>> encoded_;                          ///< by hash
-  mutable std::string environment_signature_;  ///< the meshes and cut-out objects it was made from
-  mutable std::shared_ptr<const TriangleMesh> environment_mesh_;
+  std::string environment_signature_;  ///< the meshes and cut-out objects it was made from
+  std::shared_ptr<const TriangleMesh> environment_mesh_;
+  std::string whole_signature_;        ///< the meshes (and their poses) the uncut environment was made from
+  std::shared_ptr<const TriangleMesh> whole_environment_;  ///< uncut, in the world frame
+  std::shared_ptr<const EnvironmentCut> latest_;  ///< the cut the objects ask for now (its inputs)
+  std::future<std::unique_ptr<EnvironmentCut>> job_;
 };
 
 /// 16 hex digits of FNV-1a 64 over `bytes`.
