@@ -41,12 +41,14 @@ struct SceneClient::Impl {
   std::string folder, service_id;
   std::map<int64_t, RemoteObject> objects;
   std::map<std::string, std::shared_ptr<const TriangleMesh>> meshes;
-  struct Partial {
+  // A mesh being fetched: the chunks so far, and the ones asked for and not yet arrived.
+  struct Transfer {
     std::vector<std::vector<uint8_t>> chunks;
     int received = 0;
+    std::set<int32_t> in_flight;
+    Clock::time_point asked{};
   };
-  std::map<std::string, Partial> partial;
-  std::map<std::string, Clock::time_point> requested;
+  std::map<std::string, Transfer> transfers;
   std::map<int64_t, artisan::query_reply_t> replies;
   std::map<int64_t, artisan::command_result_t> results;
   int64_t next_request = 1;
@@ -85,20 +87,21 @@ struct SceneClient::Impl {
   void on_chunk(const lcm::ReceiveBuffer*, const std::string&, const artisan::mesh_chunk_t* c) {
     if (meshes.count(c->hash)) return;
     // Chunks asked for by this client, or by another for a mesh this scene uses (a replayed log).
-    const bool wanted = requested.count(c->hash) || std::any_of(objects.begin(), objects.end(), [&](const auto& kv) {
+    const bool wanted = transfers.count(c->hash) || std::any_of(objects.begin(), objects.end(), [&](const auto& kv) {
                           return kv.second.info.mesh.hash == c->hash;
                         });
     if (!wanted) return;
     if (c->n_chunks <= 0 || c->chunk_index < 0 || c->chunk_index >= c->n_chunks) return;
-    auto& p = partial[c->hash];
-    if (p.chunks.size() != size_t(c->n_chunks)) p = Partial{std::vector<std::vector<uint8_t>>(size_t(c->n_chunks)), 0};
-    if (!p.chunks[size_t(c->chunk_index)].empty()) return;
-    p.chunks[size_t(c->chunk_index)] = c->data;
-    if (++p.received < c->n_chunks) return;
+    auto& t = transfers[c->hash];
+    if (t.chunks.size() != size_t(c->n_chunks)) t = Transfer{std::vector<std::vector<uint8_t>>(size_t(c->n_chunks)), 0, {}, {}};
+    t.in_flight.erase(c->chunk_index);
+    if (!t.chunks[size_t(c->chunk_index)].empty()) return;
+    t.chunks[size_t(c->chunk_index)] = c->data;
+    if (++t.received < c->n_chunks) return;
     std::vector<uint8_t> bytes;
-    for (const auto& ch : p.chunks) bytes.insert(bytes.end(), ch.begin(), ch.end());
-    partial.erase(c->hash);
-    if (worldmodel::content_hash(bytes) != c->hash) return;  // corrupt: ask again later
+    for (const auto& ch : t.chunks) bytes.insert(bytes.end(), ch.begin(), ch.end());
+    transfers.erase(c->hash);
+    if (worldmodel::content_hash(bytes) != c->hash) return;  // corrupt: start again
     auto mesh = std::make_shared<const TriangleMesh>(io::decode_mesh(bytes, "mesh " + c->hash));
     meshes[c->hash] = mesh;
     for (auto& [id, o] : objects)
@@ -112,21 +115,31 @@ struct SceneClient::Impl {
     if (r->client_id == client_id) results[r->request_id] = *r;
   }
 
-  // Asks for every mesh the scene uses and has not got (again after a second without answer).
+  // Asks for the next chunks of every mesh the scene uses and has not got: a window of chunks
+  // at a time, the next window when these have arrived, and again what has not arrived after a
+  // while (UDP may drop them). Returns whether any mesh is still missing.
   bool request_missing_meshes() {
     bool missing = false;
     for (const auto& [id, o] : objects) {
       const auto& h = o.info.mesh.hash;
       if (h.empty() || meshes.count(h)) continue;
       missing = true;
-      auto it = requested.find(h);
-      if (it != requested.end() && Clock::now() - it->second < std::chrono::seconds(1)) continue;
+      auto& t = transfers[h];
+      if (t.chunks.empty() && o.info.mesh.n_bytes > 0)
+        t.chunks.resize(size_t((o.info.mesh.n_bytes + kMeshChunkBytes - 1) / kMeshChunkBytes));
+      if (!t.in_flight.empty() && Clock::now() - t.asked < std::chrono::milliseconds(300)) continue;
+      t.in_flight.clear();
+      for (size_t i = 0; i < t.chunks.size() && t.in_flight.size() < size_t(kMeshChunkWindow); ++i)
+        if (t.chunks[i].empty()) t.in_flight.insert(int32_t(i));
       artisan::mesh_request_t req;
       req.utime = now_utime();
       req.client_id = client_id;
       req.hash = h;
+      req.chunks.assign(t.in_flight.begin(), t.in_flight.end());  // empty (all) if the size is unknown
+      req.n_chunks = int32_t(req.chunks.size());
+      if (req.chunks.empty()) t.in_flight.insert(-1);              // wait before asking for all again
       lcm.publish(kMeshRequestChannel, &req);
-      requested[h] = Clock::now();
+      t.asked = Clock::now();
     }
     return missing;
   }

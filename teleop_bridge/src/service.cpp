@@ -147,7 +147,12 @@ struct Service::Impl {
       return error(channel, e.what());
     }
     const int n = int((bytes->size() + kMeshChunkBytes - 1) / kMeshChunkBytes);
-    for (int i = 0; i < n; ++i) {
+    std::vector<int32_t> wanted = req.chunks;
+    if (wanted.empty())
+      for (int i = 0; i < n; ++i) wanted.push_back(i);
+    for (const int32_t i : wanted) {
+      if (i < 0 || i >= n)
+        return error(channel, "mesh " + req.hash + " has " + std::to_string(n) + " chunks, not a chunk " + std::to_string(i));
       artisan::mesh_chunk_t c;
       c.utime = now_utime();
       c.hash = req.hash;
@@ -158,8 +163,8 @@ struct Service::Impl {
       c.data.assign(bytes->begin() + long(begin), bytes->begin() + long(end));
       c.n_bytes = int32_t(c.data.size());
       lcm.publish(kMeshChunkChannel, &c);
+      ++stats.mesh_chunks_sent;
     }
-    ++stats.meshes_sent;
   }
 
   void on_query(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {

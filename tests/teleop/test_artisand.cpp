@@ -19,7 +19,8 @@
 namespace artisan::teleop {
 namespace {
 
-const std::string kUrl = "udpm://239.255.76.67:7667?ttl=0";
+// A small receive buffer, as on many CI machines: mesh transfers must survive dropped datagrams.
+const std::string kUrl = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=120000";
 
 bool in_netns() { return std::getenv("ARTISAN_IN_NETNS") != nullptr; }
 

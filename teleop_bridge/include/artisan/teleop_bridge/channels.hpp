@@ -14,8 +14,11 @@ inline constexpr const char* kEnvironmentChannel = "ARTISAN_ENVIRONMENT";      /
 inline constexpr const char* kHeartbeatChannel = "ARTISAN_HEARTBEAT";          ///< heartbeat_t
 inline constexpr const char* kServiceErrorChannel = "ARTISAN_SERVICE_ERROR";   ///< service_error_t
 
-/// Mesh data per chunk message (LCM messages stay under 1 MB).
-inline constexpr int kMeshChunkBytes = 512 * 1024;
+/// Mesh data per chunk message: one UDP datagram (LCM fragments larger messages, and one lost
+/// fragment would lose the whole chunk).
+inline constexpr int kMeshChunkBytes = 48 * 1024;
+/// Chunks a client asks for at once; it asks for the next ones when these have arrived.
+inline constexpr int kMeshChunkWindow = 16;
 /// Default LCM URL: multicast that never leaves the machine (ttl=0).
 inline constexpr const char* kDefaultLcmUrl = "udpm://239.255.76.67:7667?ttl=0";
 

@@ -32,7 +32,7 @@ struct ServiceStats {
   int64_t commands_applied = 0;
   int64_t commands_refused = 0;
   int64_t malformed_messages = 0;
-  int64_t meshes_sent = 0;
+  int64_t mesh_chunks_sent = 0;
 };
 
 class Service {
