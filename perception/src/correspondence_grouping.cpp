@@ -56,24 +56,30 @@ GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tg
   std::sort(candidates.begin(), candidates.end(), [](auto& a, auto& b) { return a.similarity > b.similarity; });
   if (candidates.size() > params.max_candidates) candidates.resize(params.max_candidates);
 
-  // Geometric consistency (section 5.1): drop matches consistent with under a quarter of the others.
+  // Geometric consistency (section 5.1). Johnson and Hebert drop matches consistent with under a
+  // quarter of the others; in clutter, with several models, the right matches of one instance
+  // are a small minority, so a match is kept when it is consistent with enough others to form a
+  // group, and seeds are tried in order of how many others agree with them.
   const size_t n = candidates.size();
   const float gamma = static_cast<float>(params.gamma_m);
   std::vector<Consistency> pair(n * n);
 #pragma omp parallel for schedule(dynamic, 16)
   for (size_t a = 0; a < n; ++a)
     for (size_t b = 0; b < n; ++b) pair[a * n + b] = a == b ? Consistency{0, 0} : consistency(src, tgt, candidates[a], candidates[b], gamma);
-  std::vector<size_t> kept;
+  std::vector<size_t> kept, support(n, 0);
   for (size_t a = 0; a < n; ++a) {
-    size_t consistent = 0;
-    for (size_t b = 0; b < n; ++b) consistent += b != a && pair[a * n + b].d_gc < params.geometric_consistency;
-    if (4 * consistent >= n - 1 || n < 8) kept.push_back(a);
+    for (size_t b = 0; b < n; ++b) support[a] += b != a && pair[a * n + b].d_gc < params.geometric_consistency;
+    if (static_cast<int>(support[a]) + 1 >= params.min_group_size) kept.push_back(a);
   }
+  std::stable_sort(kept.begin(), kept.end(), [&](size_t a, size_t b) { return support[a] > support[b]; });
   result.consistent_candidates = kept.size();
 
   // Grouping (section 5.2): from each seed, add matches whose grouping distance to every member
-  // stays below T_gc; each group of at least min_group_size gives a transform.
+  // stays below T_gc; each group of at least min_group_size gives a transform. A match already in
+  // a group is not a seed again.
+  std::vector<char> grouped(n, 0);
   for (size_t s = 0; s < kept.size() && static_cast<int>(result.groups.size()) < params.max_groups; ++s) {
+    if (grouped[kept[s]]) continue;
     std::vector<size_t> group = {kept[s]};
     for (size_t c : kept) {
       if (c == kept[s]) continue;
@@ -87,7 +93,10 @@ GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tg
     }
     if (static_cast<int>(group.size()) < params.min_group_size) continue;
     GroupedTransform g;
-    for (size_t k : group) g.members.push_back(candidates[k]);
+    for (size_t k : group) {
+      g.members.push_back(candidates[k]);
+      grouped[k] = 1;
+    }
     g.size = group.size();
     g.T_target_source = transform_from(src, tgt, g.members);
     result.groups.push_back(std::move(g));

@@ -3,9 +3,15 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <limits>
 #include <numbers>
+#include <optional>
+#include <unordered_map>
 
 #include <Eigen/Eigenvalues>
+#include <nanoflann.hpp>
 
 #include "artisan/core/error.hpp"
 #include "artisan/perception/icp.hpp"
@@ -17,7 +23,145 @@ namespace artisan {
 namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// What each sensor saw of the scene, for the free-space test: per view, the nearest scene depth
+// in each bin of a projection (gnomonic about the view's main direction for perspective rays, an
+// orthographic grid for parallel rays).
+class FreeSpace {
+ public:
+  FreeSpace(const PointCloud& scene, const std::vector<SensorView>& views, double resolution_m, double tolerance_m)
+      : tolerance_(tolerance_m) {
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (const auto& p : scene.points) centroid += p.cast<double>();
+    if (!scene.points.empty()) centroid /= static_cast<double>(scene.points.size());
+    for (const auto& view : views) {
+      Map m;
+      m.view = view;
+      const Eigen::Vector3d axis = view.rays == SensorView::Rays::kPerspective ? Eigen::Vector3d((centroid - view.origin_mesh).normalized())
+                                                                             : Eigen::Vector3d(-view.toward_sensor_mesh.normalized());
+      if (!axis.allFinite()) continue;
+      const Eigen::Vector3d x = axis.unitOrthogonal();
+      m.R.row(0) = x.transpose();
+      m.R.row(1) = axis.cross(x).transpose();
+      m.R.row(2) = axis.transpose();
+      std::vector<double> depths;
+      for (const auto& p : scene.points) depths.push_back(m.local(p.cast<double>()).z());
+      double median = 1.0;
+      if (!depths.empty()) {
+        std::nth_element(depths.begin(), depths.begin() + static_cast<long>(depths.size() / 2), depths.end());
+        median = std::max(depths[depths.size() / 2], 1e-3);
+      }
+      // Bins about 1.5 resolutions wide at the scene's median depth.
+      m.bin = view.rays == SensorView::Rays::kPerspective ? 1.5 * resolution_m / median : 1.5 * resolution_m;
+      for (const auto& p : scene.points) {
+        const auto key = m.key(p.cast<double>());
+        if (!key) continue;
+        auto [it, inserted] = m.nearest.try_emplace(Map::pack(key->u, key->v), key->depth);
+        if (!inserted) it->second = std::min(it->second, key->depth);
+      }
+      maps_.push_back(std::move(m));
+    }
+  }
+
+  struct Check {
+    double free_space = 0;  ///< share of the sensor-facing model surface in front of what was seen
+    double explained = 1;   ///< share of the model surface a sensor should have seen that it did see
+  };
+  /// The model (its points at T) against what each view saw. A model point faces a view when its
+  /// normal points at the sensor; it is in free space when it lies in front of the nearest seen
+  /// surface there, explained when on it, occluded when behind it. It should have been seen when
+  /// it faces the view and nothing of the model itself lies in front of it.
+  Check check(const PointCloud& model, const Transform& T) const {
+    Check c;
+    if (maps_.empty()) return c;
+    std::vector<Eigen::Vector3d> p(model.points.size()), n(model.points.size());
+    for (size_t i = 0; i < p.size(); ++i) {
+      p[i] = T * model.points[i].cast<double>();
+      n[i] = T.linear() * model.normals[i].cast<double>();
+    }
+    std::vector<char> counted(p.size(), 0), violates(p.size(), 0), expected(p.size(), 0), seen_there(p.size(), 0);
+    std::unordered_map<int64_t, double> self;  // the model's own nearest depth per bin
+    std::vector<std::optional<Key>> keys(p.size());
+    for (const auto& m : maps_) {
+      self.clear();
+      for (size_t i = 0; i < p.size(); ++i) {
+        keys[i] = m.key(p[i]);
+        if (!keys[i] || n[i].dot(m.toward(p[i])) <= 0) continue;
+        auto [it, inserted] = self.try_emplace(Map::pack(keys[i]->u, keys[i]->v), keys[i]->depth);
+        if (!inserted) it->second = std::min(it->second, keys[i]->depth);
+      }
+      for (size_t i = 0; i < p.size(); ++i) {
+        if (!keys[i] || n[i].dot(m.toward(p[i])) <= 0) continue;
+        const double seen = m.nearest_around(*keys[i]);
+        if (!std::isfinite(seen)) continue;  // the sensor saw nothing there: no evidence either way
+        counted[i] = 1;
+        if (keys[i]->depth < seen - tolerance_) violates[i] = 1;
+        // Parallel rays are only an approximation of a linear scanner's (the Stanford Cyberware
+        // scans' real ray directions are not recorded): what it should have seen is not predicted.
+        if (m.view.rays == SensorView::Rays::kPerspective && keys[i]->depth <= self.at(Map::pack(keys[i]->u, keys[i]->v)) + tolerance_) {
+          expected[i] = 1;
+          if (std::abs(keys[i]->depth - seen) <= tolerance_) seen_there[i] = 1;
+        }
+      }
+    }
+    size_t facing = 0, in_front = 0, should = 0, did = 0;
+    for (size_t i = 0; i < p.size(); ++i) {
+      facing += counted[i];
+      in_front += violates[i];
+      should += expected[i];
+      did += expected[i] && seen_there[i];
+    }
+    if (facing) c.free_space = static_cast<double>(in_front) / static_cast<double>(facing);
+    if (should) c.explained = static_cast<double>(did) / static_cast<double>(should);
+    return c;
+  }
+
+ private:
+  struct Key {
+    int64_t u, v;
+    double depth;
+  };
+  struct Map {
+    SensorView view;
+    Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  ///< rows: local x, y, z (z along the view)
+    double bin = 1.0;
+    std::unordered_map<int64_t, double> nearest;
+    static int64_t pack(int64_t u, int64_t v) { return static_cast<int64_t>((static_cast<uint64_t>(u) << 32) ^ (static_cast<uint64_t>(v) & 0xffffffffu)); }
+    Eigen::Vector3d local(const Eigen::Vector3d& p) const {
+      return view.rays == SensorView::Rays::kPerspective ? Eigen::Vector3d(R * (p - view.origin_mesh)) : Eigen::Vector3d(R * p);
+    }
+    Eigen::Vector3d toward(const Eigen::Vector3d& p) const {
+      return view.rays == SensorView::Rays::kPerspective ? Eigen::Vector3d(view.origin_mesh - p) : view.toward_sensor_mesh;
+    }
+    /// The nearest seen depth around a bin (3 x 3: the bins are small); infinity when none.
+    double nearest_around(const Key& k) const {
+      double seen = std::numeric_limits<double>::infinity();
+      for (int du = -1; du <= 1; ++du)
+        for (int dv = -1; dv <= 1; ++dv)
+          if (auto it = nearest.find(pack(k.u + du, k.v + dv)); it != nearest.end()) seen = std::min(seen, it->second);
+      return seen;
+    }
+    std::optional<Key> key(const Eigen::Vector3d& p) const {
+      const Eigen::Vector3d q = local(p);
+      if (view.rays == SensorView::Rays::kPerspective) {
+        if (!(q.z() > 1e-6)) return std::nullopt;
+        return Key{static_cast<int64_t>(std::floor(q.x() / q.z() / bin)), static_cast<int64_t>(std::floor(q.y() / q.z() / bin)), q.norm()};
+      }
+      return Key{static_cast<int64_t>(std::floor(q.x() / bin)), static_cast<int64_t>(std::floor(q.y() / bin)), q.z()};
+    }
+  };
+  double tolerance_;
+  std::vector<Map> maps_;
+};
+
 }  // namespace
+
+struct SpinImageLibrary::SearchIndex {
+  using Tree = nanoflann::KDTreeEigenMatrixAdaptor<Eigen::MatrixXf, -1, nanoflann::metric_L2_Simple, false>;
+  Eigen::MatrixXf coefficients;                  ///< components x all points of all models
+  std::vector<std::pair<size_t, size_t>> owner;  ///< column -> (model, point)
+  std::unique_ptr<Tree> tree;
+};
 
 Eigen::MatrixXf normalised_spin_images(const SpinImageStack& stack) {
   const int bins = stack.width * stack.width;
@@ -43,7 +187,7 @@ void SpinImageLibrary::add_model(const std::string& name, const TriangleMesh& me
     if (m.name == name) throw Error("spin-image library: a model named \"" + name + "\" is already in it");
   Model model;
   model.name = name;
-  model.points = resample_oriented_points(oriented_points(mesh), params_.resolution_m);
+  model.points = sample_surface(mesh, params_.resolution_m);
   if (model.points.points.size() < 10) throw Error("spin-image library: model \"" + name + "\" has fewer than 10 points at the library resolution");
   const KdTree3 tree(model.points.points);
   model.images = normalised_spin_images(compute_spin_images(model.points, tree, {}, params_.resolution_m, params_.spin));
@@ -86,7 +230,59 @@ void SpinImageLibrary::compress() {
   k = std::max<Eigen::Index>(k, 1);
   basis_ = eig.eigenvectors().rowwise().reverse().leftCols(k).cast<float>();
   for (auto& m : models_) m.coefficients = project(m.images);
+  auto index = std::make_shared<SearchIndex>();
+  index->coefficients.resize(k, total);
+  Eigen::Index column = 0;
+  for (size_t m = 0; m < models_.size(); ++m)
+    for (Eigen::Index j = 0; j < models_[m].coefficients.cols(); ++j) {
+      index->coefficients.col(column++) = models_[m].coefficients.col(j);
+      index->owner.emplace_back(m, static_cast<size_t>(j));
+    }
+  index->tree = std::make_unique<SearchIndex::Tree>(k, std::cref(index->coefficients), 16);
+  index_ = std::move(index);
   compressed_ = true;
+}
+
+std::vector<std::vector<SpinImageLibrary::Match>> SpinImageLibrary::nearest(const Eigen::MatrixXf& images, int k, bool compressed) {
+  compress();
+  const auto n = images.cols();
+  std::vector<std::vector<Match>> best(static_cast<size_t>(n));
+  if (k < 1 || models_.empty()) return best;
+  if (compressed) {
+    const Eigen::MatrixXf query = project(images);
+    const size_t kk = std::min<size_t>(static_cast<size_t>(k), index_->owner.size());
+#pragma omp parallel for schedule(dynamic, 64)
+    for (Eigen::Index i = 0; i < n; ++i) {
+      std::vector<Eigen::Index> idx(kk);
+      std::vector<float> d2(kk);
+      const Eigen::VectorXf q = query.col(i);
+      index_->tree->query(q.data(), kk, idx.data(), d2.data());
+      auto& b = best[static_cast<size_t>(i)];
+      for (size_t r = 0; r < kk; ++r) {
+        const auto& [m, p] = index_->owner[static_cast<size_t>(idx[r])];
+        b.push_back({d2[r], m, p});
+      }
+    }
+    return best;
+  }
+  const Eigen::VectorXf query_sq = images.colwise().squaredNorm();
+  for (size_t m = 0; m < models_.size(); ++m) {
+    const Eigen::MatrixXf& lib = models_[m].images;
+    const Eigen::VectorXf lib_sq = lib.colwise().squaredNorm();
+    const Eigen::MatrixXf dot = images.transpose() * lib;
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index i = 0; i < dot.rows(); ++i) {
+      auto& b = best[static_cast<size_t>(i)];
+      for (Eigen::Index j = 0; j < dot.cols(); ++j) {
+        const float d2 = query_sq[i] + lib_sq[j] - 2 * dot(i, j);
+        if (static_cast<int>(b.size()) < k || d2 < b.back().d2) {
+          if (static_cast<int>(b.size()) == k) b.pop_back();
+          b.insert(std::upper_bound(b.begin(), b.end(), d2, [](float v, const Match& h) { return v < h.d2; }), Match{d2, m, static_cast<size_t>(j)});
+        }
+      }
+    }
+  }
+  return best;
 }
 
 Eigen::MatrixXf SpinImageLibrary::project(const Eigen::MatrixXf& images) const {
@@ -100,11 +296,30 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   RecognitionResult result;
   const double res = library.params().resolution_m;
   auto t0 = Clock::now();
-  const PointCloud scene_points = resample_oriented_points(oriented_points(scene), res);
+  const PointCloud scene_points = sample_surface(scene, res);
   const KdTree3 scene_tree(scene_points.points);
+  // Basis points: a share of the scene's points, leaving out those whose neighbourhood (half the
+  // spin-image support) is flat within a bin: a plane's spin image matches any model's flat
+  // parts equally well and only feeds the grouping with wrong matches (tables, walls, floors).
   std::vector<size_t> basis;
   const size_t step = std::max<size_t>(1, static_cast<size_t>(std::lround(1.0 / std::clamp(params.scene_point_fraction, 1e-3, 1.0))));
-  for (size_t i = 0; i < scene_points.points.size(); i += step) basis.push_back(i);
+  {
+    const double bin = res * library.params().spin.bin_size_factor;
+    const float radius = static_cast<float>(0.5 * library.params().spin.image_width * bin);
+    std::vector<char> flat(scene_points.points.size(), 0);
+#pragma omp parallel for schedule(dynamic, 256)
+    for (size_t i = 0; i < scene_points.points.size(); ++i) {
+      if (!params.skip_flat_basis_points) continue;
+      std::vector<size_t> near;
+      scene_tree.within(scene_points.points[i], radius, near);
+      float deviation = 0;
+      for (size_t j : near) deviation = std::max(deviation, std::abs(scene_points.normals[i].dot(scene_points.points[j] - scene_points.points[i])));
+      flat[i] = deviation < static_cast<float>(bin);
+    }
+    size_t k = 0;
+    for (size_t i = 0; i < scene_points.points.size(); ++i)
+      if (!flat[i] && k++ % step == 0) basis.push_back(i);
+  }
   result.scene_points = basis.size();
   const auto stack = compute_spin_images(scene_points, scene_tree, basis, res, library.params().spin);
   const Eigen::MatrixXf scene_images = normalised_spin_images(stack);
@@ -113,30 +328,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // Nearest library images of each scene image, over all models, in the compressed (or full)
   // space. For unit vectors |a - b|^2 = 2 - 2 r, so a distance estimates the correlation r.
   t0 = Clock::now();
-  const Eigen::MatrixXf query = params.compressed_search ? library.project(scene_images) : scene_images;
-  const Eigen::VectorXf query_sq = query.colwise().squaredNorm();
-  struct Hit {
-    float d2;
-    size_t model, point;
-  };
-  std::vector<std::vector<Hit>> best(basis.size());
-  for (size_t m = 0; m < library.model_count(); ++m) {
-    const Eigen::MatrixXf& lib = params.compressed_search ? library.model_coefficients(m) : library.model_images(m);
-    const Eigen::VectorXf lib_sq = lib.colwise().squaredNorm();
-    const Eigen::MatrixXf dot = query.transpose() * lib;
-#pragma omp parallel for schedule(static)
-    for (Eigen::Index i = 0; i < dot.rows(); ++i) {
-      auto& b = best[static_cast<size_t>(i)];
-      for (Eigen::Index j = 0; j < dot.cols(); ++j) {
-        const float d2 = query_sq[i] + lib_sq[j] - 2 * dot(i, j);
-        if (static_cast<int>(b.size()) < params.neighbours || d2 < b.back().d2) {
-          if (static_cast<int>(b.size()) == params.neighbours) b.pop_back();
-          b.insert(std::upper_bound(b.begin(), b.end(), d2, [](float v, const Hit& h) { return v < h.d2; }),
-                   Hit{d2, m, static_cast<size_t>(j)});
-        }
-      }
-    }
-  }
+  const auto best = library.nearest(scene_images, params.neighbours, params.compressed_search);
   std::vector<std::vector<detail::Correspondence>> per_model(library.model_count());
   for (size_t i = 0; i < best.size(); ++i)
     for (const auto& h : best[i]) {
@@ -148,6 +340,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // Per model: group, estimate, verify by ICP; accept instances one at a time, removing the
   // scene points each explains.
   t0 = Clock::now();
+  const FreeSpace free_space(scene_points, params.views, res, params.free_space_tolerance_factor * res);
   const IcpSettings coarse = detail::verification_icp(res, 15);
   IcpSettings fine = coarse;
   fine.max_iterations = 40;
@@ -161,6 +354,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   for (size_t m = 0; m < library.model_count(); ++m) {
     const PointCloud& model = library.model_points(m);
     auto candidates = per_model[m];
+    if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
+      std::fprintf(stderr, "model %s: %zu model points, %zu correspondences from %zu scene points\n", library.model_name(m).c_str(),
+                   model.points.size(), candidates.size(), basis.size());
     std::vector<char> explained(scene_points.points.size(), 0);
     for (int instance = 0; instance < params.max_instances && candidates.size() >= 3; ++instance) {
       const auto grouped = detail::group_correspondences(model, scene_points, candidates, grouping);
@@ -177,11 +373,27 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       }
       if (verified.empty()) break;
       std::sort(verified.begin(), verified.end(), [](const Verified& a, const Verified& b) { return a.score > b.score; });
-      // Only the winner gets the fine ICP.
+      // In score order, the first pose that passes the fine ICP and the free-space test wins.
+      Verified* winner = nullptr;
+      FreeSpace::Check winner_seen;
+      for (int tried = 0; tried < std::min<int>(params.max_candidates_verified, static_cast<int>(verified.size())); ++tried) {
+        auto& v = verified[static_cast<size_t>(tried)];
+        v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
+        v.T = v.icp.T_target_source;
+        const auto seen = free_space.check(model, v.T);
+        if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
+          std::fprintf(stderr, "  %s try %d: overlap %.3f rmse %.2f mm free space %.3f explained %.3f group %zu\n", library.model_name(m).c_str(),
+                       tried, v.icp.overlap_fraction, v.icp.rmse_m * 1e3, seen.free_space, seen.explained, v.size);
+        if (v.icp.overlap_fraction < params.min_model_overlap || v.icp.rmse_m > params.max_rmse_factor * res ||
+            seen.free_space > params.max_free_space_fraction || seen.explained < params.min_visible_explained)
+          continue;
+        winner = &v;
+        winner_seen = seen;
+        break;
+      }
+      if (!winner) break;
+      if (winner != &verified.front()) std::swap(*winner, verified.front());
       auto& top = verified.front();
-      top.icp = icp_point_to_plane(model, scene_points, scene_tree, top.T, fine);
-      top.T = top.icp.T_target_source;
-      if (top.icp.overlap_fraction < params.min_model_overlap || top.icp.rmse_m > params.max_rmse_factor * res) break;
       RecognizedInstance found;
       found.model = library.model_name(m);
       found.model_index = m;
@@ -190,6 +402,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       found.rmse_m = top.icp.rmse_m;
       found.score = top.score;
       found.correspondences = top.size;
+      found.free_space_fraction = winner_seen.free_space;
+      found.visible_explained = winner_seen.explained;
       for (size_t k = 1; k < verified.size(); ++k) {
         const auto& other = verified[k];
         if (other.score < top.score - params.ambiguity_margin) break;
@@ -212,6 +426,10 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     }
   }
   result.seconds_verify = since(t0);
+  if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
+    std::fprintf(stderr, "scene %zu points, %zu basis; library %d components; spin images %.2f s, search %.2f s, verify %.2f s\n",
+                 scene_points.points.size(), basis.size(), library.components(), result.seconds_spin_images, result.seconds_search,
+                 result.seconds_verify);
   return result;
 }
 

@@ -1,5 +1,6 @@
 #include "artisan/perception/spin_image.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <unordered_map>
@@ -89,6 +90,38 @@ PointCloud resample_oriented_points(const PointCloud& cloud, double resolution_m
     out.normals.push_back((c.sum_n / len).cast<float>());
   }
   return out;
+}
+
+PointCloud sample_surface(const TriangleMesh& mesh, double resolution_m) {
+  if (!(resolution_m > 0)) throw Error("sample surface: resolution " + std::to_string(resolution_m) + " m is not positive");
+  TriangleMesh normals_from = mesh;
+  if (normals_from.normals.size() != normals_from.vertices.size()) normals_from.compute_vertex_normals();
+  const auto& v = mesh.vertices;
+  const auto& vn = normals_from.normals;
+  const double step = 0.5 * resolution_m;
+  PointCloud dense;
+  for (const auto& f : mesh.faces) {
+    const Eigen::Vector3f &a = v[f[0]], &b = v[f[1]], &c = v[f[2]];
+    Eigen::Vector3f face = (b - a).cross(c - a);
+    if (!(face.norm() > 0)) continue;  // degenerate
+    face.normalize();
+    const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    const int n = std::clamp(static_cast<int>(std::ceil(longest / step)), 1, 4096);
+    const float inv = 1.0f / static_cast<float>(n);
+    // Sub-triangle centroids of the n x n split, in barycentric coordinates (i + 1/3 or 2/3).
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; i + j < n; ++j)
+        for (int up = 0; up < (i + j + 1 < n ? 2 : 1); ++up) {
+          const float u = (static_cast<float>(i) + (up ? 2.0f : 1.0f) / 3.0f) * inv;
+          const float w = (static_cast<float>(j) + (up ? 2.0f : 1.0f) / 3.0f) * inv;
+          const float t = 1.0f - u - w;
+          Eigen::Vector3f normal = t * vn[f[0]] + u * vn[f[1]] + w * vn[f[2]];
+          if (!(normal.norm() > 1e-6f) || normal.normalized().dot(face) < 0.7071f) normal = face;
+          dense.points.push_back(t * a + u * b + w * c);
+          dense.normals.push_back(normal.normalized());
+        }
+  }
+  return resample_oriented_points(dense, resolution_m);
 }
 
 }  // namespace artisan

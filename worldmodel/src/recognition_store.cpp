@@ -1,5 +1,7 @@
 #include "artisan/worldmodel/recognition_store.hpp"
 
+#include "artisan/worldmodel/grid_store.hpp"
+
 #include <array>
 #include <map>
 
@@ -23,7 +25,9 @@ void collect_models(const Workspace& ws, ObjectId folder, std::vector<ObjectId>&
 
 constexpr io::BlobMagic kSpinMagic = {'A', 'R', 'T', 'I', 'S', 'S', 'P', '\x1a'};
 constexpr uint32_t kSpinVersion = 1;
-constexpr const char* kSpinEncoding = "artisan-spin-images/1";
+// Version 2: points sampled over the model's surface (version 1 used its vertices); stacks of an
+// older version are recomputed when recognising.
+constexpr const char* kSpinEncoding = "artisan-spin-images/2";
 
 // Payload: f64 resolution, i32 image width, f64 support angle, u64 n, points, normals (3 f32
 // each), images (width^2 f32 each, normalised).
@@ -76,13 +80,41 @@ NewObject make_model_object(const std::string& name, const TriangleMesh& mesh, c
   return object;
 }
 
+// Where the sensors that saw a scene mesh were, in its frame: an original mesh's own sensor; a
+// merged mesh's (its grid's) meshes' sensors, each moved by its pose in the grid. None when the
+// mesh has no source image (imported): recognition then has no free-space test.
+std::vector<SensorView> scene_sensor_views(const Workspace& ws, ObjectId scene_id) {
+  const auto prov = ws.provenance(scene_id);
+  if (!prov) return {};
+  if (prov->operation == "mesh") {
+    const auto view = sensor_view_of_mesh(ws, scene_id);
+    if (view.source.rfind("no source image", 0) == 0) return {};
+    return {view.view_mesh};
+  }
+  if (prov->operation == "merge" || prov->operation == "grid extract") {
+    for (ObjectId input : prov->inputs) {
+      if (ws.get(input).kind != ObjectKind::kGrid) continue;
+      std::vector<SensorView> views;
+      for (const auto& e : grid_meshes(ws, input)) {
+        SensorView v = e.view_mesh;
+        v.origin_mesh = e.T_grid_mesh * v.origin_mesh;
+        v.toward_sensor_mesh = e.T_grid_mesh.linear() * v.toward_sensor_mesh;
+        views.push_back(v);
+      }
+      return views;
+    }
+  }
+  return {};
+}
+
 std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id, std::vector<ObjectId> models) {
   const auto scene = ws.get(scene_id);
   if (scene.kind != ObjectKind::kMesh) throw Error(scene.path + " is a " + to_string(scene.kind) + ", not a mesh");
   if (models.empty()) collect_models(ws, ws.root(), models);
   if (models.empty()) throw Error("the workspace holds no models (import one with: artisan import FILE --as model)");
   const ModelLibraryParams library_params;
-  const RecognitionParams params;
+  RecognitionParams params;
+  params.views = scene_sensor_views(ws, scene_id);
   SpinImageLibrary library(library_params);
   std::vector<ObjectInfo> model_info;
   for (ObjectId m : models) {
@@ -93,7 +125,7 @@ std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id,
     Eigen::MatrixXf images;
     bool stored = false;
     for (const auto& b : ws.blobs(m))
-      if (b.role == "spin_images") stored = decode_spin_images(b.data, library_params, info.path, points, images);
+      if (b.role == "spin_images" && b.encoding == kSpinEncoding) stored = decode_spin_images(b.data, library_params, info.path, points, images);
     if (stored) library.add_precomputed_model(info.name, std::move(points), std::move(images));
     else library.add_model(info.name, ws.load_mesh(m));
     model_info.push_back(info);
@@ -105,14 +137,18 @@ std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id,
                            {"pca_variance", library_params.pca_variance},
                            {"scene_point_fraction", params.scene_point_fraction},
                            {"min_model_overlap", params.min_model_overlap},
-                           {"max_rmse_factor", params.max_rmse_factor}};
+                           {"max_rmse_factor", params.max_rmse_factor},
+                           {"sensor_views", params.views.size()},
+                           {"max_free_space_fraction", params.max_free_space_fraction},
+                           {"min_visible_explained", params.min_visible_explained}};
   std::vector<RecognizedObject> out;
   ws.write([&] {
     std::map<std::string, int> count;
     for (const auto& inst : result.instances) {
       const auto& model = model_info[inst.model_index];
       json figures = {{"overlap", inst.overlap_fraction}, {"rmse_m", inst.rmse_m},        {"score", inst.score},
-                      {"correspondences", inst.correspondences}, {"ambiguous", inst.ambiguous}};
+                      {"correspondences", inst.correspondences}, {"ambiguous", inst.ambiguous},
+                      {"free_space", inst.free_space_fraction}, {"visible_explained", inst.visible_explained}};
       json metadata = {{"model", model.path}, {"model_id", model.id}, {"T_scene_model", to_row_major(inst.T_scene_model)}, {"figures", figures}};
       if (inst.ambiguous) metadata["T_scene_model_alternative"] = to_row_major(inst.T_scene_model_alternative);
       if (model.metadata.contains("T_model_grasps")) {

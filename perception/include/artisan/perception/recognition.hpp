@@ -3,6 +3,7 @@
 // model spin images, compressed by PCA onto the leading eigen-spin-images (Johnson & Hebert,
 // CVPR 1998) and searched in the compressed space; correspondences grouped per model, poses
 // estimated, refined by ICP and verified. Several models and several instances of one model.
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -10,6 +11,7 @@
 
 #include "artisan/core/pose.hpp"
 #include "artisan/core/triangle_mesh.hpp"
+#include "artisan/perception/integration.hpp"
 #include "artisan/perception/spin_image.hpp"
 
 namespace artisan {
@@ -48,6 +50,15 @@ class SpinImageLibrary {
   Eigen::MatrixXf project(const Eigen::MatrixXf& images) const;
   bool compressed() const { return compressed_; }
 
+  struct Match {
+    float d2;  ///< squared distance between normalised images (2 - 2 x correlation)
+    size_t model, point;
+  };
+  /// The k nearest library images of each query column (normalised spin images, bins x n), over
+  /// all models, nearest first: in the compressed space through a k-d tree over every model's
+  /// coefficients, or (compressed = false) by brute force over the full images.
+  std::vector<std::vector<Match>> nearest(const Eigen::MatrixXf& images, int k, bool compressed);
+
  private:
   struct Model {
     std::string name;
@@ -60,6 +71,8 @@ class SpinImageLibrary {
   Eigen::VectorXf mean_;
   Eigen::MatrixXf basis_;  ///< bins x components
   bool compressed_ = false;
+  struct SearchIndex;  ///< k-d tree over every model's coefficients, made by compress()
+  std::shared_ptr<SearchIndex> index_;
 };
 
 /// Spin images normalised so that a dot product is their correlation coefficient.
@@ -67,6 +80,7 @@ Eigen::MatrixXf normalised_spin_images(const SpinImageStack& stack);
 
 struct RecognitionParams {
   double scene_point_fraction = 0.25;  ///< [1] share of the scene's resampled points whose spin images are matched
+  bool skip_flat_basis_points = true;  ///< [1] no spin images for points whose neighbourhood is a plane
   int neighbours = 3;                  ///< [1] library matches kept per scene point (nearest in the search space)
   bool compressed_search = true;       ///< search the PCA space (false: the full spin images)
   double min_correlation = 0.6;        ///< [1] matches below this estimated correlation are dropped
@@ -77,6 +91,17 @@ struct RecognitionParams {
   double max_rmse_factor = 0.5;        ///< [1] largest accepted residual, in resolutions
   int max_instances = 5;               ///< [1] per model
   double ambiguity_margin = 0.05;      ///< [1] a different pose within this overlap of the best is an ambiguity
+  /// Where the sensors that saw the scene were, in the scene frame (one view for a single scan,
+  /// one per merged scan). With views, a pose is refused when more than
+  /// max_free_space_fraction of the model's surface facing a sensor lies in front of what that
+  /// sensor saw: in space the sensor saw through, where the object cannot be. Empty: no such test.
+  std::vector<SensorView> views;
+  double max_free_space_fraction = 0.1;  ///< [1]
+  /// With perspective views: the share of the model surface a sensor should have seen (facing
+  /// it, not hidden by the model itself) that lies on the scene surface must reach this.
+  double min_visible_explained = 0.65;
+  double free_space_tolerance_factor = 3.0;  ///< [resolutions] how far in front of the seen surface counts
+  int max_candidates_verified = 5;     ///< [1] poses tried in score order per instance before giving up
 };
 
 struct RecognizedInstance {
@@ -87,6 +112,8 @@ struct RecognizedInstance {
   double rmse_m = 0.0;            ///< [m]
   double score = 0.0;             ///< [1] overlap - residual penalty; higher is better
   size_t correspondences = 0;     ///< in the winning group
+  double free_space_fraction = 0.0;  ///< [1] share of the model's sensor-facing surface in seen free space
+  double visible_explained = 1.0;    ///< [1] share of the model surface the sensors should have seen that they saw
   bool ambiguous = false;         ///< another pose explains the scene almost as well (symmetry)
   Transform T_scene_model_alternative = Transform::Identity();  ///< that pose, when ambiguous
 };
@@ -97,7 +124,8 @@ struct RecognitionResult {
   double seconds_spin_images = 0.0, seconds_search = 0.0, seconds_verify = 0.0;
 };
 
-/// Finds every instance of the library's models in `scene`. A scene with none gives none.
+/// Finds every instance of the library's models in `scene`. A scene with none gives none. With
+/// ARTISAN_RECOGNITION_DEBUG set, prints each model's matches and every pose tried (stderr).
 RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library, const RecognitionParams& params = {});
 
 }  // namespace artisan

@@ -48,4 +48,11 @@ SpinImageStack compute_spin_images(const PointCloud& cloud, const KdTree3& tree,
 /// assume.
 PointCloud resample_oriented_points(const PointCloud& cloud, double resolution_m);
 
+/// Oriented points spread over the surface of `mesh` (not only its vertices: a CAD model's long
+/// thin triangles carry most of its area), then resampled on a voxel grid of edge
+/// `resolution_m`. Each triangle is split into sub-triangles no longer than half the resolution
+/// whose centroids are sampled; a sample's normal interpolates the vertex normals, or is the
+/// face's own normal where they disagree with it by more than 45 degrees (a sharp edge).
+PointCloud sample_surface(const TriangleMesh& mesh, double resolution_m);
+
 }  // namespace artisan
