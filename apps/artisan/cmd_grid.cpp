@@ -10,6 +10,7 @@
 #include "artisan/worldmodel/grid_store.hpp"
 #include "artisan/worldmodel/workspace.hpp"
 #include "commands.hpp"
+#include "progress.hpp"
 
 namespace artisan::cli {
 
@@ -23,11 +24,6 @@ void say(const GlobalOptions& options, const std::string& line) {
   if (!options.quiet && !options.json) std::cerr << line << "\n";
 }
 
-// Progress goes to stderr even with --json (stdout carries the JSON), not with --quiet.
-worldmodel::ProgressFn progress_of(const GlobalOptions& options) {
-  if (options.quiet) return {};
-  return [](const std::string& line) { std::cerr << line << "\n"; };
-}
 
 size_t budget_bytes(double megabytes) {
   if (!(std::isfinite(megabytes) && megabytes > 0 && megabytes < 1e7))
@@ -167,7 +163,8 @@ void add_grid_commands(CLI::App& app, const GlobalOptions& options, Action& acti
       if (mo.budget_mb) def.memory_budget_bytes = budget_bytes(*mo.budget_mb);
       auto ws = Workspace::open(options.db);
       const auto mm = ws.resolve(mo.multimesh);
-      const auto r = worldmodel::merge_multimesh(ws, mm.id, def, {}, progress_of(options));
+      Progress progress("merging " + mm.path, 0, options.quiet);  // on stderr also with --json, as before
+      const auto r = worldmodel::merge_multimesh(ws, mm.id, def, {}, progress.callback());
       json added = json::array();
       size_t points = 0;
       double distribute_s = 0;

@@ -11,6 +11,7 @@
 #include "artisan/worldmodel/world_model.hpp"
 #include "artisan/worldmodel/workspace.hpp"
 #include "commands.hpp"
+#include "progress.hpp"
 
 namespace artisan::cli {
 
@@ -50,7 +51,8 @@ struct MultiMeshAddOptions {
 };
 
 struct MeshOptions {
-  std::string image, name, roi;
+  std::vector<std::string> images;
+  std::string name, roi;
   std::optional<double> min_angle, max_edge, thinning, jump_ratio;
   std::vector<std::string> settings;
 };
@@ -59,9 +61,9 @@ struct MeshOptions {
 
 void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& action) {
   static MeshOptions m;
-  auto* mesh = app.add_subcommand("mesh", "Triangulate an image into an original mesh (constrained Delaunay, minimum angle)");
-  mesh->add_option("image", m.image, "Image ID or path")->required();
-  mesh->add_option("--name", m.name, "Mesh name (default: IMAGE-mesh), in the image's folder");
+  auto* mesh = app.add_subcommand("mesh", "Triangulate images into original meshes (constrained Delaunay, minimum angle); all in one transaction");
+  mesh->add_option("image", m.images, "Image IDs or paths")->required();
+  mesh->add_option("--name", m.name, "Mesh name (default: IMAGE-mesh), in the image's folder; one image only");
   mesh->add_option("--roi", m.roi, "Region of interest in pixels: x,y,w,h");
   mesh->add_option("--min-angle", m.min_angle, "Smallest triangle angle in the image plane [deg], at most 20.7");
   mesh->add_option("--max-edge", m.max_edge, "Longest 3-D edge [m]");
@@ -71,8 +73,13 @@ void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& 
   mesh->callback([&options, &action] {
     action = [&options] {
       auto ws = Workspace::open(options.db);
-      const auto image = ws.resolve(m.image);
-      if (image.kind != ObjectKind::kImage) throw Error(image.path + " is a " + to_string(image.kind) + ", not an image");
+      if (!m.name.empty() && m.images.size() > 1) throw Error("--name names one mesh; " + std::to_string(m.images.size()) + " images were given");
+      std::vector<worldmodel::ObjectInfo> images;
+      for (const auto& i : m.images) {
+        images.push_back(ws.resolve(i));
+        if (images.back().kind != ObjectKind::kImage)
+          throw Error(images.back().path + " is a " + to_string(images.back().kind) + ", not an image");
+      }
       json overrides = worldmodel::parse_settings(m.settings);
       if (m.min_angle) overrides["min_angle_deg"] = *m.min_angle;
       if (m.max_edge) overrides["max_edge_length_m"] = *m.max_edge;
@@ -85,9 +92,22 @@ void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& 
           throw Error("--roi \"" + m.roi + "\" is not x,y,w,h with a positive width and height");
         overrides["roi_pixels"] = {x, y, x + w - 1, y + h - 1};
       }
-      const auto id = worldmodel::run_operation(ws, "mesh", {image.id}, overrides, *image.folder,
-                                                m.name.empty() ? image.name + "-mesh" : m.name);
-      report(options, ws, id, "meshed");
+      std::vector<worldmodel::ObjectId> made;
+      Progress progress("meshing", images.size(), options.quiet || options.json);
+      ws.write([&] {
+        for (const auto& image : images) {
+          made.push_back(worldmodel::run_operation(ws, "mesh", {image.id}, overrides, *image.folder,
+                                                   m.name.empty() ? image.name + "-mesh" : m.name));
+          progress.update(made.size(), ws.get(made.back()).path);
+        }
+      });
+      if (options.json && made.size() > 1) {
+        json list = json::array();
+        for (auto id : made) list.push_back(derived_json(ws, id));
+        std::cout << json{{"objects", list}}.dump(2) << "\n";
+      } else {
+        for (auto id : made) report(options, ws, id, "meshed");
+      }
       return 0;
     };
   });
@@ -161,34 +181,46 @@ void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& 
     };
   });
 
-  static std::string rec_mesh;
+  static std::vector<std::string> rec_meshes;
   static std::vector<std::string> rec_models;
-  auto* rec = app.add_subcommand("recognize", "Find known models in a mesh; each instance becomes a recognized_model object");
-  rec->add_option("mesh", rec_mesh, "Scene mesh ID or path")->required();
+  auto* rec = app.add_subcommand("recognize", "Find known models in meshes; each instance becomes a recognized_model object; all in one transaction");
+  rec->add_option("mesh", rec_meshes, "Scene mesh IDs or paths")->required();
   rec->add_option("--models", rec_models, "Model IDs or paths (comma-separated; default: every model, as --all)")->delimiter(',');
   static bool rec_all = false;
   rec->add_flag("--all", rec_all, "Every model in the workspace (the default)");
   rec->callback([&options, &action] {
     action = [&options] {
       auto ws = Workspace::open(options.db);
-      const auto scene = ws.resolve(rec_mesh);
+      std::vector<worldmodel::ObjectInfo> scenes;
+      for (const auto& s : rec_meshes) scenes.push_back(ws.resolve(s));
       std::vector<worldmodel::ObjectId> models;
       if (rec_all && !rec_models.empty()) throw Error("give --models or --all, not both");
       for (const auto& name : rec_models) models.push_back(ws.resolve(name).id);
-      const auto found = worldmodel::recognize_models(ws, scene.id, models);
-      json list = json::array();
-      for (const auto& f : found)
-        list.push_back({{"id", f.id}, {"path", ws.get(f.id).path}, {"model", f.model}, {"T_scene_model", to_row_major(f.T_scene_model)},
-                        {"score", f.figures["score"]}, {"overlap", f.figures["overlap"]}, {"rmse_m", f.figures["rmse_m"]},
-                        {"ambiguous", f.figures["ambiguous"]}});
+      json results = json::array();
+      Progress progress("recognizing", scenes.size(), options.quiet || options.json);
+      ws.write([&] {
+        for (const auto& scene : scenes) {
+          const auto found = worldmodel::recognize_models(ws, scene.id, models);
+          json list = json::array();
+          for (const auto& f : found)
+            list.push_back({{"id", f.id}, {"path", ws.get(f.id).path}, {"model", f.model}, {"T_scene_model", to_row_major(f.T_scene_model)},
+                            {"score", f.figures["score"]}, {"overlap", f.figures["overlap"]}, {"rmse_m", f.figures["rmse_m"]},
+                            {"ambiguous", f.figures["ambiguous"]}});
+          results.push_back({{"scene", scene.path}, {"instances", list}});
+          progress.update(results.size(), scene.path + ": " + std::to_string(found.size()) + " found");
+        }
+      });
       if (options.json) {
-        std::cout << json{{"scene", scene.path}, {"instances", list}}.dump(2) << "\n";
+        std::cout << (results.size() == 1 ? results[0] : json{{"scenes", results}}).dump(2) << "\n";
       } else if (!options.quiet) {
-        if (found.empty()) std::cerr << "no model found in " << scene.path << "\n";
-        for (const auto& f : list)
-          std::cerr << "found " << f["model"].get<std::string>() << " in " << scene.path << ": " << f["path"].get<std::string>() << ", overlap "
-                    << f["overlap"].get<double>() << ", residual " << f["rmse_m"].get<double>() * 1e3 << " mm"
-                    << (f["ambiguous"].get<bool>() ? " (ambiguous: another pose fits almost as well)" : "") << "\n";
+        for (const auto& r : results) {
+          const std::string scene = r["scene"];
+          if (r["instances"].empty()) std::cerr << "no model found in " << scene << "\n";
+          for (const auto& f : r["instances"])
+            std::cerr << "found " << f["model"].get<std::string>() << " in " << scene << ": " << f["path"].get<std::string>() << ", overlap "
+                      << f["overlap"].get<double>() << ", residual " << f["rmse_m"].get<double>() * 1e3 << " mm"
+                      << (f["ambiguous"].get<bool>() ? " (ambiguous: another pose fits almost as well)" : "") << "\n";
+        }
       }
       return 0;
     };

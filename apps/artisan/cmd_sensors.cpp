@@ -14,6 +14,7 @@
 #include "artisan/core/error.hpp"
 #include "artisan/sensors/client.hpp"
 #include "commands.hpp"
+#include "progress.hpp"
 
 namespace artisan::cli {
 
@@ -24,7 +25,8 @@ using nlohmann::json;
 struct SensorArgs {
   std::string server;
   std::string sensor;
-  std::optional<double> pan_deg, tilt_deg;
+  std::vector<double> pan_deg, tilt_deg;          ///< acquire: the sweep
+  std::optional<double> ptu_pan_deg, ptu_tilt_deg;  ///< ptu: the target
   std::vector<std::string> params;
   std::string folder = "/";
   std::string name;
@@ -110,50 +112,83 @@ void add_sensor_commands(CLI::App& app, const GlobalOptions& options, Action& ac
   auto* acquire = app.add_subcommand("acquire", "Take an acquisition through the sensor server and store it as an image in the workspace");
   acquire->add_option("sensor", a.sensor, "Sensor name (see 'artisan sensors')")->required();
   server_option(acquire);
-  acquire->add_option("--pan", a.pan_deg, "Move the pan/tilt head first: pan [degrees]");
-  acquire->add_option("--tilt", a.tilt_deg, "Move the pan/tilt head first: tilt [degrees]");
+  acquire->add_option("--pan", a.pan_deg, "Move the pan/tilt head first: pan [degrees]; a list (40,45,50) sweeps")->delimiter(',');
+  acquire->add_option("--tilt", a.tilt_deg, "Move the pan/tilt head first: tilt [degrees]; a list sweeps (every pan at every tilt)")->delimiter(',');
   acquire->add_option("--param", a.params, "Acquisition parameter NAME=VALUE (repeatable; see 'artisan sensors')");
   acquire->add_option("--folder", a.folder, "Workspace folder the image goes into (must exist)")->capture_default_str();
-  acquire->add_option("--name", a.name, "The image's name (default: SENSOR-N, the first free N)");
+  acquire->add_option("--name", a.name, "The image's name (default: SENSOR-N, the first free N); a sweep: NAME-1, NAME-2, ...");
   acquire->callback([&options, &action] {
     action = [&options] {
       return reporting(options, [&options] {
-        sensors::AcquireRequest req;
-        req.params = parse_params(a.params);
-        if (a.pan_deg) req.pan_rad = rad(*a.pan_deg);
-        if (a.tilt_deg) req.tilt_rad = rad(*a.tilt_deg);
-        // Check the destination before the (slow) acquisition.
-        ImageDestination dest = open_image_destination(options, a.folder, a.name.empty() ? "unnamed" : a.name);
+        // The head's poses: every pan at every tilt (none: where it is).
+        std::vector<std::pair<std::optional<double>, std::optional<double>>> poses;
+        const std::vector<std::optional<double>> pans = a.pan_deg.empty() ? std::vector<std::optional<double>>{std::nullopt}
+                                                                           : std::vector<std::optional<double>>(a.pan_deg.begin(), a.pan_deg.end());
+        const std::vector<std::optional<double>> tilts = a.tilt_deg.empty() ? std::vector<std::optional<double>>{std::nullopt}
+                                                                             : std::vector<std::optional<double>>(a.tilt_deg.begin(), a.tilt_deg.end());
+        for (const auto& t : tilts)
+          for (const auto& p : pans) poses.emplace_back(p, t);
+        const bool sweep = poses.size() > 1;
+        // Check the destination before the (slow) acquisitions.
+        ImageDestination dest = open_image_destination(options, a.folder, a.name.empty() ? "unnamed" : sweep ? a.name + "-1" : a.name);
         const std::string address = sensors::SensorClient::resolve_address(a.server);
         sensors::SensorClient client(address);
-        const auto encoded = client.acquire_encoded(a.sensor, req);
-        const auto acq = sensors::decode_acquisition(encoded, "sensor '" + a.sensor + "' via " + address);
-        json out{{"server", address}, {"sensor", a.sensor}, {"image", nullptr}, {"environment", nullptr}, {"pan_tilt", nullptr}};
-        json metadata = json::object();
-        if (acq.environment) out["environment"] = metadata["environment"] = environment_json(*acq.environment);
-        if (acq.pan_tilt) out["pan_tilt"] = metadata["pan_tilt"] = pan_tilt_json(*acq.pan_tilt);
-        std::optional<worldmodel::ObjectId> id;
-        if (acq.range) {
-          if (a.name.empty()) dest.name = free_name(dest.workspace, a.folder, a.sensor);
-          json params{{"server", address}, {"sensor", a.sensor}, {"params", req.params}};
-          if (req.pan_rad) params["pan_rad"] = *req.pan_rad;
-          if (req.tilt_rad) params["tilt_rad"] = *req.tilt_rad;
-          id = import_range_image(dest, *acq.range, {"sensor-acquire", params, {}}, metadata);
-          const auto info = dest.workspace.get(*id);
-          out["image"] = {{"id", *id}, {"path", info.path}};
-          out["kind"] = acq.range->sensor.kind;
-          out["width"] = acq.range->width;
-          out["height"] = acq.range->height;
-          out["valid_pixels"] = acq.range->valid_count();
-          out["bytes"] = encoded.range_ari.size();
+        // Acquire everything first, then store it all in one transaction (the workspace is not
+        // held while the sensor works).
+        struct Taken {
+          sensors::AcquireRequest request;
+          sensors::Acquisition acquisition;
+          size_t bytes = 0;
+        };
+        std::vector<Taken> taken;
+        Progress progress("acquiring from " + a.sensor, poses.size(), options.quiet || options.json);
+        for (const auto& [pan, tilt] : poses) {
+          sensors::AcquireRequest req;
+          req.params = parse_params(a.params);
+          if (pan) req.pan_rad = rad(*pan);
+          if (tilt) req.tilt_rad = rad(*tilt);
+          const auto encoded = client.acquire_encoded(a.sensor, req);
+          taken.push_back({req, sensors::decode_acquisition(encoded, "sensor '" + a.sensor + "' via " + address), encoded.range_ari.size()});
+          char where[96] = "";
+          if (pan || tilt) std::snprintf(where, sizeof where, "pan %.1f, tilt %.1f deg", pan.value_or(0.0), tilt.value_or(0.0));
+          progress.update(taken.size(), where);
         }
-        if (options.json) {
-          std::cout << out.dump(2) << "\n";
-        } else if (!options.quiet) {
+        json outs = json::array();
+        std::vector<std::optional<worldmodel::ObjectId>> ids(taken.size());
+        dest.workspace.write([&] {
+          for (size_t k = 0; k < taken.size(); ++k) {
+            const auto& acq = taken[k].acquisition;
+            const auto& req = taken[k].request;
+            if (!acq.range) continue;
+            dest.name = !a.name.empty() ? (sweep ? a.name + "-" + std::to_string(k + 1) : a.name) : free_name(dest.workspace, a.folder, a.sensor);
+            json metadata = json::object();
+            if (acq.environment) metadata["environment"] = environment_json(*acq.environment);
+            if (acq.pan_tilt) metadata["pan_tilt"] = pan_tilt_json(*acq.pan_tilt);
+            json params{{"server", address}, {"sensor", a.sensor}, {"params", req.params}};
+            if (req.pan_rad) params["pan_rad"] = *req.pan_rad;
+            if (req.tilt_rad) params["tilt_rad"] = *req.tilt_rad;
+            ids[k] = import_range_image(dest, *acq.range, {"sensor-acquire", params, {}}, metadata);
+          }
+        });
+        for (size_t k = 0; k < taken.size(); ++k) {
+          const auto& acq = taken[k].acquisition;
+          json out{{"server", address}, {"sensor", a.sensor}, {"image", nullptr}, {"environment", nullptr}, {"pan_tilt", nullptr}};
+          if (acq.environment) out["environment"] = environment_json(*acq.environment);
+          if (acq.pan_tilt) out["pan_tilt"] = pan_tilt_json(*acq.pan_tilt);
+          if (acq.range) {
+            out["image"] = {{"id", *ids[k]}, {"path", dest.workspace.get(*ids[k]).path}};
+            out["kind"] = acq.range->sensor.kind;
+            out["width"] = acq.range->width;
+            out["height"] = acq.range->height;
+            out["valid_pixels"] = acq.range->valid_count();
+            out["bytes"] = taken[k].bytes;
+          }
+          outs.push_back(out);
+          if (options.json || options.quiet) continue;
           if (acq.range)
             std::cerr << "acquired " << acq.range->sensor.kind << " " << acq.range->width << " x " << acq.range->height << ", "
                       << acq.range->valid_count() << " valid pixels from " << a.sensor << " at " << address << "; stored as "
-                      << out["image"]["path"].get<std::string>() << " (ID " << *id << ")\n";
+                      << out["image"]["path"].get<std::string>() << " (ID " << *ids[k] << ")\n";
           else
             std::cerr << "sensor '" << a.sensor << "' gives no range image: its reading is printed, nothing is stored\n";
           if (acq.environment)
@@ -162,6 +197,7 @@ void add_sensor_commands(CLI::App& app, const GlobalOptions& options, Action& ac
           if (acq.pan_tilt)
             std::cerr << "pan/tilt: " << deg(acq.pan_tilt->pan_rad) << ", " << deg(acq.pan_tilt->tilt_rad) << " degrees\n";
         }
+        if (options.json) std::cout << (sweep ? json{{"acquisitions", outs}} : outs[0]).dump(2) << "\n";
         return 0;
       });
     };
@@ -203,18 +239,18 @@ void add_sensor_commands(CLI::App& app, const GlobalOptions& options, Action& ac
   auto* ptu = app.add_subcommand("ptu", "Move a sensor's pan/tilt head (or, without --pan/--tilt, read its position)");
   ptu->add_option("sensor", a.sensor, "Sensor name (one with pan/tilt; see 'artisan sensors')")->required();
   server_option(ptu);
-  ptu->add_option("--pan", a.pan_deg, "Pan [degrees] (default: keep)");
-  ptu->add_option("--tilt", a.tilt_deg, "Tilt [degrees] (default: keep)");
+  ptu->add_option("--pan", a.ptu_pan_deg, "Pan [degrees] (default: keep)");
+  ptu->add_option("--tilt", a.ptu_tilt_deg, "Tilt [degrees] (default: keep)");
   ptu->callback([&options, &action] {
     action = [&options] {
       return reporting(options, [&options] {
         const std::string address = sensors::SensorClient::resolve_address(a.server);
         sensors::SensorClient client(address);
         auto reply = client.pan_tilt(a.sensor);
-        if (a.pan_deg || a.tilt_deg) {
+        if (a.ptu_pan_deg || a.ptu_tilt_deg) {
           sensors::PanTiltState target = reply.state;
-          if (a.pan_deg) target.pan_rad = rad(*a.pan_deg);
-          if (a.tilt_deg) target.tilt_rad = rad(*a.tilt_deg);
+          if (a.ptu_pan_deg) target.pan_rad = rad(*a.ptu_pan_deg);
+          if (a.ptu_tilt_deg) target.tilt_rad = rad(*a.ptu_tilt_deg);
           reply = client.move_pan_tilt(a.sensor, target);
         }
         if (options.json) {

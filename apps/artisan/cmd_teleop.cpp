@@ -1,6 +1,7 @@
 // `artisan teleop ...`: a sample teleoperation client of the world-model service (artisand):
-// shows the scene, lists grasp approaches of an object checked for collision, checks a pose, and
-// sends the operator's edits. Everything goes over LCM; the workspace is not opened.
+// shows the scene (with the robots' joint values), lists grasp approaches of an object checked
+// for collision, checks a shape at a pose or the robot at joint values, and sends the operator's
+// edits. Everything goes over LCM; the workspace is not opened.
 #include <cstdlib>
 #include <iomanip>
 #include <iostream>
@@ -22,6 +23,8 @@ struct TeleopOptions {
   std::string author;
   std::string object, model, pose, link;
   std::vector<double> box, gripper = {0.08, 0.03, 0.10};
+  std::string robot;
+  std::vector<std::string> joints, allow;
   double sphere = 0.0, approach_m = 0.10;
 };
 
@@ -34,6 +37,13 @@ artisan::pose_t to_pose(const Transform& T) {
   p.quaternion_xyzw[2] = q.z();
   p.quaternion_xyzw[3] = q.w();
   return p;
+}
+
+Transform teleop_pose(const artisan::pose_t& p) {
+  Transform T = Transform::Identity();
+  T.translation() = Eigen::Vector3d(p.position[0], p.position[1], p.position[2]);
+  T.linear() = Eigen::Quaterniond(p.quaternion_xyzw[3], p.quaternion_xyzw[0], p.quaternion_xyzw[1], p.quaternion_xyzw[2]).normalized().toRotationMatrix();
+  return T;
 }
 
 json pose_json(const Transform& T) {
@@ -103,8 +113,17 @@ void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& ac
         for (const auto& g : obj.T_world_grasps) grasps.push_back(pose_json(g));
         out["objects"].push_back({{"id", id}, {"path", i.path}, {"kind", i.kind}, {"model", i.model}, {"version", i.version},
                                   {"status", i.status}, {"T_world_object", pose_json(obj.T_world_object)}, {"score", i.score},
-                                  {"overlap", i.overlap}, {"ambiguous", i.ambiguous}, {"triangles", i.mesh.n_triangles},
+                                  {"overlap", i.overlap}, {"ambiguous", i.ambiguous != 0}, {"triangles", i.mesh.n_triangles},
                                   {"grasps", grasps}, {"attached_to", i.attached_to}});
+      }
+      out["robots"] = json::array();
+      for (const auto& r : s.client.robots()) {
+        json joints = json::object();
+        for (size_t k = 0; k < r.joint_names.size(); ++k) joints[r.joint_names[k]] = r.joint_values[k];
+        json links = json::object();
+        for (size_t k = 0; k < r.link_names.size(); ++k) links[r.link_names[k]] = pose_json(teleop_pose(r.link_poses[k]));
+        out["robots"].push_back({{"id", r.object_id}, {"name", r.name}, {"path", r.path}, {"version", r.version},
+                                 {"T_world_root", pose_json(teleop_pose(r.root_pose))}, {"joints", joints}, {"T_world_links", links}});
       }
       if (options.json) {
         std::cout << out.dump(2) << "\n";
@@ -119,6 +138,12 @@ void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& ac
           std::cout << i.model << " at " << where(obj.T_world_object) << ", " << i.status << ", score " << std::setprecision(3) << i.score
                     << ", " << obj.T_world_grasps.size() << " grasp(s)" << (i.ambiguous ? ", AMBIGUOUS (symmetric)" : "")
                     << (i.attached_to.empty() ? "" : ", attached to " + i.attached_to) << "\n";
+      }
+      for (const auto& r : s.client.robots()) {
+        std::cout << "  " << std::setw(6) << r.object_id << "  " << r.path << "  robot " << r.name << " (version " << r.version << ") at "
+                  << where(teleop_pose(r.root_pose)) << ":";
+        for (size_t k = 0; k < r.joint_names.size(); ++k) std::cout << " " << r.joint_names[k] << "=" << std::setprecision(4) << r.joint_values[k];
+        std::cout << "\n";
       }
       return 0;
     };
@@ -175,45 +200,73 @@ void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& ac
     };
   });
 
-  auto* check = teleop->add_subcommand("check", "Check a box or sphere at a pose for collision and clearance");
+  auto* check = teleop->add_subcommand("check", "Check a box or sphere at a pose, or a robot at joint values, for collision and clearance");
   auto* box_opt = check->add_option("--box", o->box, "Box size x y z [m]")->expected(3);
   auto* sphere_opt = check->add_option("--sphere", o->sphere, "Sphere radius [m]");
   box_opt->excludes(sphere_opt);
-  check->add_option("--pose", o->pose, "T_world_shape: \"tx ty tz qx qy qz qw\" or 16 numbers")->required();
+  check->add_option("--pose", o->pose, "T_world_shape of the box or sphere: \"tx ty tz qx qy qz qw\" or 16 numbers");
+  check->add_option("--joints", o->joints, "The robot at these joint values: NAME=VALUE ... [rad or m]; joints not given keep their current values");
+  check->add_option("--robot", o->robot, "Which robot (default: the scene's only robot); alone: the robot at its current joints");
+  check->add_option("--allow", o->allow, "A contact that does not count: SHAPE[@OBJECT] (SHAPE e.g. ur5/base_link or *, OBJECT an ID or path)");
   check->callback([&, o] {
     action = [&, o] {
-      if (o->box.empty() && o->sphere <= 0) throw Error("give --box SX SY SZ or --sphere R");
-      const Transform T = parse_transform(o->pose);
+      const bool with_shape = !o->box.empty() || o->sphere > 0, with_robot = !o->joints.empty() || !o->robot.empty();
+      if (!with_shape && !with_robot) throw Error("give --box SX SY SZ or --sphere R (with --pose), or --joints NAME=VALUE ... for the robot");
+      if (with_shape && o->pose.empty()) throw Error("--box and --sphere need --pose");
+      const auto joints = parse_joint_values(o->joints, "--joints");
+      const Transform T = o->pose.empty() ? Transform::Identity() : parse_transform(o->pose);
       Session s(*o);
-      artisan::shape_t shape;
-      if (!o->box.empty()) shape = box_shape("shape", o->box, T);
-      else {
+      artisan::query_t q;
+      q.type = artisan::query_t::COLLISION;
+      if (!o->box.empty()) q.shapes = {box_shape("shape", o->box, T)};
+      else if (o->sphere > 0) {
+        artisan::shape_t shape;
         shape.name = "shape";
         shape.kind = artisan::shape_t::SPHERE;
         shape.dims[0] = o->sphere;
         shape.pose = to_pose(T);
+        q.shapes = {shape};
       }
-      artisan::query_t q;
-      q.type = artisan::query_t::COLLISION;
-      q.shapes = {shape};
+      if (with_robot) teleop::SceneClient::set_robot(q, o->robot, joints);
+      for (const auto& a : o->allow) {
+        artisan::allowed_pair_t pair;
+        const auto at = a.find('@');
+        pair.shape = a.substr(0, at);
+        pair.object_id = at == std::string::npos ? -1 : s.object(a.substr(at + 1)).info.object_id;
+        if (pair.shape.empty()) throw Error("--allow '" + a + "': name the shape (or *) before @");
+        q.allowed.push_back(pair);
+      }
       const auto c = s.client.query(q, o->timeout_s);
+      if (!c.ok) throw Error("the service refused the query: " + c.error);
       q.type = artisan::query_t::DISTANCE;
       q.max_distance = 1.0;
       const auto d = s.client.query(q, o->timeout_s);
-      if (!c.ok || !d.ok) throw Error("the service refused the query: " + (c.ok ? d.error : c.error));
+      if (!d.ok) throw Error("the service refused the query: " + d.error);
       std::vector<std::string> hits;
-      for (const auto& x : c.contacts) hits.push_back(s.path_of(x.object_id));
+      json contacts = json::array();
+      for (const auto& x : c.contacts) {
+        hits.push_back(s.path_of(x.object_id));
+        contacts.push_back({{"shape", x.shape}, {"object", s.path_of(x.object_id)}, {"object_id", x.object_id}, {"depth_m", -x.distance}});
+      }
       if (options.json) {
-        std::cout << json{{"in_collision", c.in_collision}, {"colliding_with", hits}, {"clearance_m", d.min_distance},
-                          {"revision", c.revision}, {"service_seconds", c.seconds}}.dump(2)
-                  << "\n";
+        json closest = nullptr;
+        if (d.n_contacts)
+          closest = {{"shape", d.contacts[0].shape}, {"object", s.path_of(d.contacts[0].object_id)}, {"object_id", d.contacts[0].object_id}};
+        json out = {{"in_collision", c.in_collision != 0}, {"colliding_with", hits}, {"contacts", contacts}, {"clearance_m", d.min_distance},
+                    {"closest", closest}, {"revision", c.revision}, {"service_seconds", c.seconds}};
+        if (with_robot) {
+          json j = json::object();
+          for (const auto& [k, v] : joints) j[k] = v;
+          out["robot"] = {{"name", o->robot.empty() ? json(nullptr) : json(o->robot)}, {"joints", j}};
+        }
+        std::cout << out.dump(2) << "\n";
       } else if (c.in_collision) {
-        std::cout << "COLLISION with";
-        for (const auto& h : hits) std::cout << " " << h;
+        std::cout << "COLLISION:";
+        for (const auto& x : c.contacts) std::cout << " " << x.shape << " with " << s.path_of(x.object_id) << ";";
         std::cout << "\n";
       } else {
         std::cout << "free, clearance " << std::fixed << std::setprecision(1) << d.min_distance * 1000 << " mm"
-                  << (d.n_contacts ? " to " + s.path_of(d.contacts[0].object_id) : "") << "\n";
+                  << (d.n_contacts ? " (" + d.contacts[0].shape + " to " + s.path_of(d.contacts[0].object_id) + ")" : "") << "\n";
       }
       return 0;
     };

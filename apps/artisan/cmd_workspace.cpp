@@ -50,6 +50,9 @@ std::string summary(const Workspace& ws, const ObjectInfo& o) {
                     m.contains("figures") ? m["figures"].value("rmse_m", 0.0) * 1e3 : 0.0,
                     m.contains("figures") && m["figures"].value("ambiguous", false) ? ", ambiguous" : "");
       return buf;
+    case ObjectKind::kRobot:
+      return "robot '" + o.subkind + "', " + std::to_string(m.value("joint_names", json::array()).size()) + " joints" +
+             (m.contains("edit") ? ", set by " + m["edit"].value("author", std::string("?")) : "");
     default: return o.subkind;
   }
 }

@@ -1,7 +1,9 @@
 #pragma once
 // The artisan command line: each group of subcommands registers itself on the app.
 #include <functional>
+#include <map>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -54,6 +56,15 @@ void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& ac
 
 /// Registers the merging commands: grid new/add/extract, merge.
 void add_grid_commands(CLI::App& app, const GlobalOptions& options, Action& action);
+
+/// Registers `robot set` and `robot show`: a robot (URDF, pose, joints) in a folder's world model.
+void add_robot_commands(CLI::App& app, const GlobalOptions& options, Action& action);
+/// Joint values from "NAME=VALUE" arguments of `option`; throws naming the argument when one is
+/// malformed, not finite or repeated.
+std::map<std::string, double> parse_joint_values(const std::vector<std::string>& assignments, const std::string& option);
+
+/// Registers `evaluate`: a folder's recognized objects against ground truth.
+void add_evaluate_command(CLI::App& app, const GlobalOptions& options, Action& action);
 
 /// Registers `render`: pictures of meshes, multimeshes, recognized models and world models.
 void add_render_command(CLI::App& app, const GlobalOptions& options, Action& action);

@@ -20,6 +20,8 @@ int main(int argc, char** argv) {
   artisan::cli::add_sim_commands(app, options, action);
   artisan::cli::add_sensor_commands(app, options, action);
   artisan::cli::add_teleop_commands(app, options, action);
+  artisan::cli::add_robot_commands(app, options, action);
+  artisan::cli::add_evaluate_command(app, options, action);
   artisan::cli::add_render_command(app, options, action);
   artisan::cli::add_grid_commands(app, options, action);
   try {

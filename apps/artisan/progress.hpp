@@ -1,19 +1,21 @@
 #pragma once
 // Progress of a long command on stderr: on a terminal a bar with the rate and the time left,
 // redrawn in place; otherwise (a log, a pipe) a plain line at most every 2 s and at the end.
-// Silent with --quiet or --json.
+// Silent with --quiet or --json, and for a single step.
 #include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
+#include <functional>
 #include <string>
 
 namespace artisan::cli {
 
 class Progress {
  public:
+  /// `total` steps (0: given by the first update(done, total, item)).
   Progress(std::string what, size_t total, bool silent)
-      : what_(std::move(what)), total_(total), silent_(silent || total < 2), tty_(::isatty(STDERR_FILENO) == 1) {}
+      : what_(std::move(what)), total_(total), silent_(silent), tty_(::isatty(STDERR_FILENO) == 1) {}
   ~Progress() {
     if (!silent_ && tty_ && drawn_) std::fputc('\n', stderr);
   }
@@ -22,7 +24,7 @@ class Progress {
 
   /// `done` of the total finished; `item` names the one just finished.
   void update(size_t done, const std::string& item = "") {
-    if (silent_) return;
+    if (silent_ || total_ < 2) return;
     const auto now = Clock::now();
     const double elapsed = std::chrono::duration<double>(now - start_).count();
     const bool last = done >= total_;
@@ -41,6 +43,14 @@ class Progress {
       std::fprintf(stderr, "%s: %s %s\n", what_.c_str(), tail, item.c_str());
     }
     std::fflush(stderr);
+  }
+  void update(size_t done, size_t total, const std::string& item) {
+    total_ = total;
+    update(done, item);
+  }
+  /// As a callback for library operations (worldmodel::ProgressFn's form).
+  std::function<void(size_t, size_t, const std::string&)> callback() {
+    return [this](size_t done, size_t total, const std::string& item) { update(done, total, item); };
   }
 
  private:

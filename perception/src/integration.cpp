@@ -11,11 +11,17 @@
 // Units inside: positions in voxels (voxel i's centre at i + 0.5, grid frame), so the inverse
 // covariances and gradients are per voxel.
 //
+// Storage: a block's voxels are kept in bricks of 2^3 voxels, and only the bricks that received
+// evidence have memory (a surface sheet fills about a fifth of the voxels of the blocks it
+// crosses; dense blocks were mostly zeros, and fresh memory is slow to come by). The bytes in a
+// store are the same either way: a mask of the non-zero voxels and their fields.
+//
 // Distribution: vertices become splats (centre, inverse covariance, weight, normal, colour, the
 // box of voxels within support_sigmas); splats are binned by the blocks their box touches and the
 // blocks are processed (those already in the cache first, then in key order) in batches that fit
-// the memory budget, one block per thread, through a per-thread float accumulator whose rows of
-// voxels along x are vectorized (BlockAccumulator).
+// the memory budget, one block per thread, through a per-thread float accumulator
+// (BlockAccumulator): per splat, the rows of voxels along x inside its support, then the Gaussian
+// on all of them at once, then the 16 sums per voxel as two 8-float vectors.
 //
 // Extraction: blocks in key order, in batches that fit the budget with their +x/+y/+z
 // neighbours (a cell's far corners lie in them); per block the derived samples (L, f, oriented
@@ -25,15 +31,27 @@
 
 #include <omp.h>
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <chrono>
+#include <exception>
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <list>
+#include <map>
 #include <unordered_map>
 #include <unordered_set>
+#include <mutex>
 
 #include <nlohmann/json.hpp>
 
@@ -50,6 +68,8 @@ constexpr double kScale = 65536.0;
 constexpr uint32_t kBlockMagic = 0x31424741;  // "AGB1"
 constexpr uint16_t kBlockVersion = 1;
 constexpr double kMaxVoxelIndex = 1 << 29;
+constexpr int kBrickEdge = 2;  // [voxels]
+constexpr int kBrickVoxels = kBrickEdge * kBrickEdge * kBrickEdge;
 
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
@@ -60,74 +80,265 @@ inline void add(int32_t& slot, int32_t value) {
   slot = static_cast<int32_t>(static_cast<uint32_t>(slot) + static_cast<uint32_t>(value));
 }
 
+// std::lrint (round to nearest, ties to even, then modulo 2^32) without the library call.
+inline int32_t round_to_int(float x) {
+#if defined(__x86_64__)
+  return static_cast<int32_t>(_mm_cvtss_si64(_mm_set_ss(x)));
+#else
+  return static_cast<int32_t>(std::lrint(x));
+#endif
+}
+
 // ---- blocks ----
 
+// A block of B^3 voxels cut into bricks of kBrickEdge^3 (the last bricks along an axis stick out
+// of the block when B is not a multiple of kBrickEdge; their outside voxels stay unused).
+struct BlockShape {
+  int edge = 0;             // B [voxels]
+  int bricks_per_edge = 0;  // ceil(B / kBrickEdge)
+  int bricks = 0;
+  explicit BlockShape(int B)
+      : edge(B), bricks_per_edge((B + kBrickEdge - 1) / kBrickEdge), bricks(bricks_per_edge * bricks_per_edge * bricks_per_edge) {}
+  int brick(int x, int y, int z) const {
+    return ((z / kBrickEdge) * bricks_per_edge + y / kBrickEdge) * bricks_per_edge + x / kBrickEdge;
+  }
+  static int in_brick(int x, int y, int z) {
+    return ((z % kBrickEdge) * kBrickEdge + y % kBrickEdge) * kBrickEdge + x % kBrickEdge;
+  }
+  // Bytes of a block with every brick allocated, with its brick table.
+  size_t full_bytes(int fields) const {
+    return static_cast<size_t>(bricks) * (static_cast<size_t>(kBrickVoxels) * fields * sizeof(int32_t) + 16 + sizeof(void*));
+  }
+};
+
+// Bricks of one size carved from chunks of 2 MiB whose pages are mapped in one system call:
+// touching fresh memory page by page costs a fault per page, several times slower (notably on
+// virtual machines). Freed bricks are kept for reuse (an evicted block's memory serves the next
+// block loaded), so the pool holds at most the most bricks ever in use at once, plus a chunk.
+// Thread-safe.
+class BrickPool {
+ public:
+  static constexpr size_t kChunkBytes = size_t{2} << 20;
+
+  explicit BrickPool(size_t brick_bytes) : brick_bytes_(brick_bytes) {}
+  ~BrickPool() {
+    for (void* chunk : chunks_) release_chunk(chunk);
+  }
+  BrickPool(const BrickPool&) = delete;
+  BrickPool& operator=(const BrickPool&) = delete;
+
+  size_t brick_bytes() const { return brick_bytes_; }
+  // A brick of zeros.
+  int32_t* get() {
+    int32_t* p = nullptr;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (free_.empty()) {
+        if (next_ + brick_bytes_ > end_) {
+          next_ = static_cast<char*>(new_chunk());
+          end_ = next_ + kChunkBytes;
+        }
+        p = reinterpret_cast<int32_t*>(next_);
+        next_ += brick_bytes_;
+        return p;  // never used: zeros
+      }
+      p = free_.back();
+      free_.pop_back();
+    }
+    std::memset(p, 0, brick_bytes_);
+    return p;
+  }
+  void put(int32_t* p) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    free_.push_back(p);
+  }
+
+ private:
+  void* new_chunk() {
+#if defined(__linux__)
+    void* p = mmap(nullptr, kChunkBytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_POPULATE, -1, 0);
+    if (p == MAP_FAILED) throw std::bad_alloc();
+#else
+    void* p = std::calloc(1, kChunkBytes);
+    if (!p) throw std::bad_alloc();
+#endif
+    chunks_.push_back(p);
+    return p;
+  }
+  static void release_chunk(void* p) {
+#if defined(__linux__)
+    munmap(p, kChunkBytes);
+#else
+    std::free(p);
+#endif
+  }
+
+  size_t brick_bytes_;
+  std::mutex mutex_;
+  std::vector<void*> chunks_;
+  std::vector<int32_t*> free_;
+  char* next_ = nullptr;
+  char* end_ = nullptr;
+};
+
+// `fields` integers per voxel, stored per brick; only the bricks that were written have memory,
+// each its own (a block grows without moving). Bricks come from a pool (the surface's) or from
+// the heap (colour channels: their share of the budget varies, and a pool keeps its peak).
+struct BrickArray {
+  std::vector<int32_t*> slot;  // per brick: kBrickVoxels * fields, voxel-major; or null
+  size_t allocated = 0;        // bricks with memory
+  BrickPool* pool = nullptr;   // where they come from; null: the heap
+
+  BrickArray() = default;
+  BrickArray(BrickArray&& o) noexcept { swap(o); }
+  BrickArray& operator=(BrickArray&& o) noexcept {
+    BrickArray moved(std::move(o));
+    swap(moved);
+    return *this;
+  }
+  ~BrickArray() {
+    for (int32_t* b : slot)
+      if (b) pool ? pool->put(b) : delete[] b;
+  }
+  void swap(BrickArray& o) noexcept {
+    std::swap(slot, o.slot);
+    std::swap(allocated, o.allocated);
+    std::swap(pool, o.pool);
+  }
+
+  // Bytes of one brick in memory.
+  static size_t brick_bytes(int fields, const BrickPool* from) {
+    return from ? from->brick_bytes() : static_cast<size_t>(kBrickVoxels) * fields * sizeof(int32_t) + 16;
+  }
+
+  const int32_t* voxel(const BlockShape& s, int fields, int x, int y, int z) const {
+    if (slot.empty()) return nullptr;
+    const int32_t* b = slot[s.brick(x, y, z)];
+    return b ? b + BlockShape::in_brick(x, y, z) * fields : nullptr;
+  }
+  int32_t* brick(int b) { return slot[b]; }
+  // Gives every brick in `bricks` memory (zeros where new), from `from` (or the heap).
+  void allocate(const BlockShape& s, int fields, const std::vector<int>& bricks, BrickPool* from) {
+    if (slot.empty()) {
+      slot.assign(s.bricks, nullptr);
+      pool = from;
+    }
+    for (int b : bricks)
+      if (!slot[b]) {
+        slot[b] = pool ? pool->get() : new int32_t[static_cast<size_t>(kBrickVoxels) * fields]();
+        ++allocated;
+      }
+  }
+  size_t bytes(int fields) const { return slot.capacity() * sizeof(slot[0]) + allocated * brick_bytes(fields, pool); }
+};
+
+struct Channel {
+  uint32_t id = 0;
+  BrickArray bricks;  // kChannelFields per voxel
+};
+
 struct Block {
-  std::vector<int32_t> surface;                 // voxels * kSurfaceFields
-  std::vector<std::vector<int32_t>> channels;   // per channel id: empty or voxels * kChannelFields
+  BrickArray surface;             // kSurfaceFields per voxel
+  std::vector<Channel> channels;  // by ascending id
   bool dirty = false;
-  bool unzeroed = false;  // a new block whose surface is reserved, zeroed by zero_if_new() (in parallel)
   int pins = 0;
+  size_t accounted = 0;  // bytes() when the cache last counted it
   std::list<BlockKey>::iterator lru;
 
   size_t bytes() const {
-    size_t n = surface.capacity();
-    for (const auto& c : channels) n += c.capacity();
-    return n * sizeof(int32_t);
+    size_t n = surface.bytes(kSurfaceFields) + channels.capacity() * sizeof(Channel);
+    for (const auto& c : channels) n += c.bricks.bytes(kChannelFields);
+    return n;
+  }
+  BrickArray& channel(uint32_t id) {
+    auto it = std::lower_bound(channels.begin(), channels.end(), id, [](const Channel& c, uint32_t i) { return c.id < i; });
+    if (it == channels.end() || it->id != id) {
+      const auto at = it - channels.begin();
+      channels.reserve(channels.size() + 1);  // exactly: the cache counts capacity
+      it = channels.insert(channels.begin() + at, Channel{id, {}});
+    }
+    return it->bricks;
   }
 };
 
 // Sparse encoding: header, channel ids, then per section (surface, each channel) an occupancy
-// bit mask of the voxels with any non-zero field followed by those voxels' fields.
-void put_section(io::ByteWriter& w, const std::vector<int32_t>& values, int fields, int voxels) {
+// bit mask of the voxels with any non-zero field followed by those voxels' fields, voxels in
+// x-fastest order.
+void put_section(io::ByteWriter& w, const BrickArray& values, const BlockShape& shape, int fields) {
+  const int B = shape.edge, voxels = B * B * B;
   std::vector<uint8_t> mask((voxels + 7) / 8, 0);
-  size_t set = 0;
-  for (int v = 0; v < voxels; ++v) {
-    const int32_t* p = values.data() + static_cast<size_t>(v) * fields;
-    if (std::any_of(p, p + fields, [](int32_t x) { return x != 0; })) {
-      mask[v / 8] = static_cast<uint8_t>(mask[v / 8] | (1u << (v % 8)));
-      ++set;
-    }
-  }
-  w.put<uint32_t>(static_cast<uint32_t>(set));
+  std::vector<const int32_t*> set;
+  int v = 0;
+  for (int z = 0; z < B; ++z)
+    for (int y = 0; y < B; ++y)
+      for (int x = 0; x < B; ++x, ++v) {
+        const int32_t* p = values.voxel(shape, fields, x, y, z);
+        if (p && std::any_of(p, p + fields, [](int32_t q) { return q != 0; })) {
+          mask[v / 8] = static_cast<uint8_t>(mask[v / 8] | (1u << (v % 8)));
+          set.push_back(p);
+        }
+      }
+  w.put<uint32_t>(static_cast<uint32_t>(set.size()));
   w.put_bytes(mask);
-  for (int v = 0; v < voxels; ++v)
-    if (mask[v / 8] & (1u << (v % 8))) w.put_array(values.data() + static_cast<size_t>(v) * fields, fields);
+  for (const int32_t* p : set) w.put_array(p, fields);
 }
 
-void get_section(io::ByteReader& r, std::vector<int32_t>& values, int fields, int voxels, const char* field) {
+void get_section(io::ByteReader& r, BrickArray& values, const BlockShape& shape, int fields, BrickPool* pool,
+                 const char* field) {
+  const int B = shape.edge, voxels = B * B * B;
   const auto set = r.get<uint32_t>(field);
   std::vector<uint8_t> mask((voxels + 7) / 8);
   r.get_array(mask.data(), mask.size(), field);
-  values.assign(static_cast<size_t>(voxels) * fields, 0);
+  std::vector<int> bricks;
+  std::vector<uint8_t> needed(shape.bricks, 0);
   size_t count = 0;
-  for (int v = 0; v < voxels; ++v) {
-    if (!(mask[v / 8] & (1u << (v % 8)))) continue;
-    if (++count > set) r.fail(field, "more voxels in the mask than the count " + std::to_string(set));
-    r.get_array(values.data() + static_cast<size_t>(v) * fields, fields, field);
-  }
+  int v = 0;
+  for (int z = 0; z < B; ++z)
+    for (int y = 0; y < B; ++y)
+      for (int x = 0; x < B; ++x, ++v) {
+        if (!(mask[v / 8] & (1u << (v % 8)))) continue;
+        ++count;
+        const int b = shape.brick(x, y, z);
+        if (!needed[b]) bricks.push_back(b);
+        needed[b] = 1;
+      }
   if (count != set) r.fail(field, "mask has " + std::to_string(count) + " voxels, count says " + std::to_string(set));
+  if (count > r.remaining() / (fields * sizeof(int32_t)))
+    r.fail(field, "needs " + std::to_string(count * fields * sizeof(int32_t)) + " bytes, " +
+                      std::to_string(r.remaining()) + " left");
+  std::sort(bricks.begin(), bricks.end());
+  values = BrickArray{};
+  if (bricks.empty()) return;
+  values.allocate(shape, fields, bricks, pool);
+  v = 0;
+  for (int z = 0; z < B; ++z)
+    for (int y = 0; y < B; ++y)
+      for (int x = 0; x < B; ++x, ++v) {
+        if (!(mask[v / 8] & (1u << (v % 8)))) continue;
+        int32_t* p = values.brick(shape.brick(x, y, z)) + BlockShape::in_brick(x, y, z) * fields;
+        r.get_array(p, fields, field);
+      }
 }
 
-std::vector<uint8_t> encode_block(const Block& b, int edge) {
-  const int voxels = edge * edge * edge;
+std::vector<uint8_t> encode_block(const Block& b, const BlockShape& shape) {
   io::ByteWriter w;
   w.put<uint32_t>(kBlockMagic);
   w.put<uint16_t>(kBlockVersion);
-  w.put<uint16_t>(static_cast<uint16_t>(edge));
+  w.put<uint16_t>(static_cast<uint16_t>(shape.edge));
   w.put<uint16_t>(kSurfaceFields);
   w.put<uint16_t>(kChannelFields);
-  std::vector<uint32_t> ids;
-  for (size_t c = 0; c < b.channels.size(); ++c)
-    if (!b.channels[c].empty()) ids.push_back(static_cast<uint32_t>(c));
-  w.put<uint32_t>(static_cast<uint32_t>(ids.size()));
-  for (uint32_t id : ids) w.put<uint32_t>(id);
-  put_section(w, b.surface, kSurfaceFields, voxels);
-  for (uint32_t id : ids) put_section(w, b.channels[id], kChannelFields, voxels);
+  std::vector<const Channel*> kept;
+  for (const auto& c : b.channels)
+    if (!c.bricks.slot.empty()) kept.push_back(&c);
+  w.put<uint32_t>(static_cast<uint32_t>(kept.size()));
+  for (const Channel* c : kept) w.put<uint32_t>(c->id);
+  put_section(w, b.surface, shape, kSurfaceFields);
+  for (const Channel* c : kept) put_section(w, c->bricks, shape, kChannelFields);
   return std::move(w.bytes());
 }
 
-Block decode_block(const std::vector<uint8_t>& bytes, int edge, const BlockKey& key) {
+// Surface bricks from `pool`, channel bricks from the heap.
+Block decode_block(const std::vector<uint8_t>& bytes, const BlockShape& shape, const BlockKey& key, BrickPool* pool) {
   const std::string source = "grid block (" + std::to_string(key.x) + ", " + std::to_string(key.y) + ", " +
                              std::to_string(key.z) + ")";
   io::ByteReader r(bytes, source);
@@ -135,7 +346,8 @@ Block decode_block(const std::vector<uint8_t>& bytes, int edge, const BlockKey& 
   const auto version = r.get<uint16_t>("version");
   if (version != kBlockVersion) r.fail("version", "unsupported version " + std::to_string(version));
   const auto stored_edge = r.get<uint16_t>("block_edge");
-  if (stored_edge != edge) r.fail("block_edge", std::to_string(stored_edge) + " voxels, the grid has " + std::to_string(edge));
+  if (stored_edge != shape.edge)
+    r.fail("block_edge", std::to_string(stored_edge) + " voxels, the grid has " + std::to_string(shape.edge));
   if (r.get<uint16_t>("surface_fields") != kSurfaceFields) r.fail("surface_fields", "unexpected count");
   if (r.get<uint16_t>("channel_fields") != kChannelFields) r.fail("channel_fields", "unexpected count");
   const auto channel_count = r.get<uint32_t>("channel_count");
@@ -145,22 +357,17 @@ Block decode_block(const std::vector<uint8_t>& bytes, int edge, const BlockKey& 
     id = r.get<uint32_t>("channel_id");
     if (id >= 65536) r.fail("channel_id", std::to_string(id) + " out of range");
   }
-  const int voxels = edge * edge * edge;
   Block b;
-  get_section(r, b.surface, kSurfaceFields, voxels, "surface");
+  get_section(r, b.surface, shape, kSurfaceFields, pool, "surface");
   for (uint32_t id : ids) {
-    if (b.channels.size() <= id) b.channels.resize(id + 1);
-    if (!b.channels[id].empty()) r.fail("channel_id", "channel " + std::to_string(id) + " twice");
-    get_section(r, b.channels[id], kChannelFields, voxels, "channel");
+    const size_t before = b.channels.size();
+    BrickArray& c = b.channel(id);
+    if (b.channels.size() == before) r.fail("channel_id", "channel " + std::to_string(id) + " twice");
+    get_section(r, c, shape, kChannelFields, nullptr, "channel");
   }
   if (r.remaining() != 0) r.fail("end", std::to_string(r.remaining()) + " trailing bytes");
+  b.channels.shrink_to_fit();
   return b;
-}
-
-void zero_if_new(Block& b) {
-  if (!b.unzeroed) return;
-  b.surface.assign(b.surface.capacity(), 0);
-  b.unzeroed = false;
 }
 
 // ---- the cache ----
@@ -168,64 +375,87 @@ void zero_if_new(Block& b) {
 class BlockCache {
  public:
   BlockCache(BlockStore& store, const GridDefinition& def)
-      : store_(store), def_(def), voxels_(def.block_edge_voxels * def.block_edge_voxels * def.block_edge_voxels),
-        max_block_bytes_(def.block_surface_bytes()) {}
+      : store_(store), def_(def), shape_(def.block_edge_voxels),
+        pool_(static_cast<size_t>(kBrickVoxels) * kSurfaceFields * sizeof(int32_t)),
+        max_block_bytes_(shape_.full_bytes(kSurfaceFields) + shape_.full_bytes(kChannelFields)) {
+    for (const BlockKey& key : store_.keys()) stored_.emplace(key, 0);
+  }
+
+  const BlockShape& shape() const { return shape_; }
+  BrickPool& pool() { return pool_; }
+  Block* resident(const BlockKey& key) {
+    auto it = blocks_.find(key);
+    return it == blocks_.end() ? nullptr : it->second.get();
+  }
+
+  // Bytes `key` would add when brought in: 0 when resident or new; its size when last evicted;
+  // for a block from an earlier session, the largest block size seen (at least a full block).
+  size_t load_estimate(const BlockKey& key) const {
+    if (blocks_.count(key)) return 0;
+    auto it = stored_.find(key);
+    if (it == stored_.end()) return 0;
+    return it->second > 0 ? it->second : max_block_bytes_;
+  }
 
   // The block, pinned; absent blocks are made (create) or nullptr.
   Block* pin(const BlockKey& key, bool create) {
-    auto it = blocks_.find(key);
-    if (it != blocks_.end()) {
-      Block* b = it->second.get();
+    if (Block* b = resident(key)) {
       lru_.splice(lru_.begin(), lru_, b->lru);
       ++b->pins;
       return b;
     }
+    auto bytes = load_bytes(key);
+    if (!bytes && !create) return nullptr;
+    return insert_pinned(key, bytes ? std::make_unique<Block>(decode_block(*bytes, shape_, key, &pool_)) : std::make_unique<Block>());
+  }
+
+  // The stored bytes of a block that is not resident, or nullopt for a new one.
+  std::optional<std::vector<uint8_t>> load_bytes(const BlockKey& key) {
+    if (!stored_.count(key)) return std::nullopt;
     auto bytes = store_.load(key);
-    std::unique_ptr<Block> b;
-    if (bytes) {
-      ++stats_.loads;
-      b = std::make_unique<Block>(decode_block(*bytes, def_.block_edge_voxels, key));
-    } else {
-      if (!create) return nullptr;
-      b = std::make_unique<Block>();
-      // Only reserved here: the zeros (and the page faults of fresh memory) come in the
-      // parallel part of distribute(), by zero_if_new().
-      b->surface.reserve(static_cast<size_t>(voxels_) * kSurfaceFields);
-      b->unzeroed = true;
-    }
+    if (bytes) ++stats_.loads;
+    return bytes;
+  }
+
+  // Makes `b` the resident, pinned block `key` (not resident before).
+  Block* insert_pinned(const BlockKey& key, std::unique_ptr<Block> b) {
     lru_.push_front(key);
     b->lru = lru_.begin();
     b->pins = 1;
-    account(static_cast<int64_t>(b->bytes()));
-    max_block_bytes_ = std::max(max_block_bytes_, b->bytes());
-    return blocks_.emplace(key, std::move(b)).first->second.get();
+    Block* out = blocks_.emplace(key, std::move(b)).first->second.get();
+    recount(out);
+    return out;
   }
 
   void unpin(Block* b) { --b->pins; }
 
-  void ensure_channel(Block* b, int channel) {
-    if (static_cast<int>(b->channels.size()) <= channel) b->channels.resize(channel + 1);
-    auto& c = b->channels[channel];
-    if (!c.empty()) return;
-    c.assign(static_cast<size_t>(voxels_) * kChannelFields, 0);
-    account(static_cast<int64_t>(c.size() * sizeof(int32_t)));
-    max_block_bytes_ = std::max(max_block_bytes_, b->bytes());
+  // Counts a block's present size (after it grew).
+  void recount(Block* b) {
+    const size_t now = b->bytes();
+    account(static_cast<int64_t>(now) - static_cast<int64_t>(b->accounted));
+    b->accounted = now;
+    max_block_bytes_ = std::max(max_block_bytes_, now);
   }
 
-  // Evicts unpinned blocks, least recently used first, until `needed` more bytes fit the budget.
+  // Bytes promised to blocks about to grow or be loaded: make_room keeps room for them.
+  void reserve(size_t bytes) { reserved_ += bytes; }
+  void release(size_t bytes) { reserved_ -= std::min(reserved_, bytes); }
+
+  // Evicts unpinned blocks, least recently used first, until `needed` more bytes (beyond the
+  // reservations) fit the budget; dirty ones are stored first.
   void make_room(size_t needed) {
     auto it = lru_.end();
-    while (stats_.resident_bytes + needed > def_.memory_budget_bytes && it != lru_.begin()) {
+    while (stats_.resident_bytes + reserved_ + needed > def_.memory_budget_bytes && it != lru_.begin()) {
       --it;
       auto found = blocks_.find(*it);
       Block* b = found->second.get();
       if (b->pins > 0) continue;
       if (b->dirty) {
-        zero_if_new(*b);
-        store_.store(*it, encode_block(*b, def_.block_edge_voxels));
+        store_.store(*it, encode_block(*b, shape_));
         ++stats_.stores;
       }
-      account(-static_cast<int64_t>(b->bytes()));
+      stored_[*it] = b->accounted;
+      account(-static_cast<int64_t>(b->accounted));
       ++stats_.evictions;
       blocks_.erase(found);
       it = lru_.erase(it);
@@ -235,10 +465,10 @@ class BlockCache {
   void flush() {
     for (auto& [key, b] : blocks_) {
       if (!b->dirty) continue;
-      zero_if_new(*b);
-      store_.store(key, encode_block(*b, def_.block_edge_voxels));
+      store_.store(key, encode_block(*b, shape_));
       ++stats_.stores;
       b->dirty = false;
+      stored_[key] = b->accounted;
     }
   }
 
@@ -251,14 +481,6 @@ class BlockCache {
     return out;
   }
 
-  bool resident(const BlockKey& key) const { return blocks_.count(key) > 0; }
-
-  size_t pinned_bytes() const {
-    size_t n = 0;
-    for (const auto& [key, b] : blocks_)
-      if (b->pins > 0) n += b->bytes();
-    return n;
-  }
   size_t max_block_bytes() const { return max_block_bytes_; }
   GridCacheStats stats() const {
     GridCacheStats s = stats_;
@@ -274,9 +496,13 @@ class BlockCache {
 
   BlockStore& store_;
   const GridDefinition& def_;
-  int voxels_;
+  BlockShape shape_;
+  BrickPool pool_;  // surface bricks; before blocks_, which return theirs when destroyed
   size_t max_block_bytes_;
+  size_t reserved_ = 0;
   std::unordered_map<BlockKey, std::unique_ptr<Block>, BlockKeyHash> blocks_;
+  // Blocks the store holds, with their size in memory when this cache evicted them (0: unknown).
+  std::unordered_map<BlockKey, size_t, BlockKeyHash> stored_;
   std::list<BlockKey> lru_;  // front: most recently used
   GridCacheStats stats_;
 };
@@ -291,6 +517,8 @@ struct Splat {
   float w;         // weight
   int32_t lo[3];   // inclusive voxel box
   int32_t hi[3];
+  int32_t block_lo[3];  // inclusive box of block keys
+  int32_t block_hi[3];
 };
 
 // exp(x) for x in [-80, 0] with a relative error below 3e-7, in plain arithmetic so that loops
@@ -308,162 +536,293 @@ inline float exp_nonpositive(float x) {
   return p * scale;
 }
 
-// One block's contributions from one distribute() call, accumulated in floats (fields stored
-// field-major, so a row of voxels along x is contiguous) and then rounded once per voxel and
-// field into the block's fixed-point sums (commit). A block's splats are always applied together
-// by one thread in splat order, so the rounded values depend only on the mesh and the block:
-// the integer sums stay independent of mesh order, threads and paging.
+// Eight floats or integers in one (AVX) register, or two (SSE); GCC vector extensions, so the
+// same code serves both compilations of the kernel.
+typedef float f8 __attribute__((vector_size(32)));
+typedef int32_t i8 __attribute__((vector_size(32)));
+typedef float f4 __attribute__((vector_size(16)));
+
+// Bricks of a block that a splat's box covers, marked in `rows` (per row of bricks along x, by
+// (y, z) brick index, one bit per brick).
+void mark_bricks(const BlockShape& shape, const Splat& s, const BlockKey& key, std::vector<uint64_t>& rows) {
+  const int B = shape.edge, nb = shape.bricks_per_edge;
+  const int32_t origin[3] = {key.x * B, key.y * B, key.z * B};
+  int lo[3], hi[3];
+  for (int k = 0; k < 3; ++k) {
+    lo[k] = std::max(s.lo[k] - origin[k], 0) / kBrickEdge;
+    hi[k] = std::min(s.hi[k] - origin[k], B - 1) / kBrickEdge;
+  }
+  const uint64_t bits = ((uint64_t{2} << (hi[0] - lo[0])) - 1) << lo[0];
+  for (int z = lo[2]; z <= hi[2]; ++z)
+    for (int y = lo[1]; y <= hi[1]; ++y) rows[z * nb + y] |= bits;
+}
+
+// One block's contributions from one distribute() call, accumulated in floats (16 per voxel:
+// the 13 surface fields, then g r, g g, g b; the colour weight sum g is L's) and then rounded
+// once per voxel and field into the block's fixed-point sums (commit). A block's splats are always
+// applied together by one thread in splat order, so the rounded values depend only on the mesh
+// and the block: the integer sums stay independent of mesh order, threads and paging.
 class BlockAccumulator {
  public:
-  static constexpr int kFields = kSurfaceFields + kChannelFields;
-
-  // Each field's array is padded by kLanes floats: rows are processed in whole groups of kLanes
-  // voxels (no scalar remainder loop), the voxels past a row's end getting exact zeros (g = 0).
+  static constexpr int kFields = 16;
   static constexpr int kLanes = 8;
 
-  explicit BlockAccumulator(int edge)
-      : edge_(edge), voxels_(edge * edge * edge), stride_(static_cast<size_t>(voxels_) + kLanes),
-        acc_(static_cast<size_t>(kFields) * stride_, 0.0f), touched_(voxels_, 0) {}
+  explicit BlockAccumulator(const BlockShape& shape)
+      : shape_(shape), voxels_(shape.edge * shape.edge * shape.edge),
+        acc_(static_cast<float*>(std::aligned_alloc(64, static_cast<size_t>(voxels_) * kFields * sizeof(float)))),
+        args_(static_cast<size_t>(voxels_) + 2 * kLanes), g_(args_.size()), voxel_(args_.size()), row_step_(args_.size()),
+        rows_(static_cast<size_t>(shape.edge) * shape.edge + 2 * kLanes), heads_(4 * (static_cast<size_t>(shape.edge) * shape.edge + 1)),
+        row_mask_(static_cast<size_t>(shape.edge) * shape.edge, 0) {
+    if (!acc_) throw std::bad_alloc();
+    std::memset(acc_.get(), 0, static_cast<size_t>(voxels_) * kFields * sizeof(float));
+  }
 
-  // Adds one splat's Gaussian over the voxels of block `key` inside its support ellipsoid.
-  // Rows run along x: for fixed (y, z) the quadratic form is q(dx) = a_xx dx^2 + 2 qb dx + qc,
-  // whose roots bound the row; along the row the Gaussian and the 17 field sums are plain
-  // arithmetic over contiguous floats, which the compiler vectorizes.
-  // Compiled twice, for AVX2 (8 lanes) and for the baseline, and picked when the program loads;
-  // no FMA contraction in either, so both give the same bits.
+  // Adds one splat's Gaussian over the voxels of block `key` inside its support ellipsoid, in
+  // three passes without data-dependent branches (rows of two or three voxels made the branches
+  // of a row-by-row loop its main cost):
+  //  1. rows along x: for fixed (y, z) the quadratic form is q(dx) = a_xx dx^2 + 2 qb dx + qc,
+  //     whose roots bound the row (eight rows at a time); each row writes eight lanes of
+  //     exponents and voxel indices to flat lists, of which its length are kept (the next row
+  //     writes over the rest);
+  //  2. the Gaussian on the whole list in one vectorized loop;
+  //  3. per voxel, sums += g * (1, -A (x - p), n n^T (6), n (3), rgb) as two 8-float vectors.
+  // Compiled twice, for AVX2 and for the baseline, and picked when the program loads; no FMA
+  // contraction in either, so both give the same bits.
   __attribute__((target_clones("avx2", "default")))
-  size_t splat(const Splat& s, const BlockKey& key, float support2, bool colour) {
-    const int B = edge_;
+  size_t splat(const Splat& s, const BlockKey& key, float support2) {
+    const int B = shape_.edge;
     const int32_t bx = key.x * B, by = key.y * B, bz = key.z * B;
     const int32_t z0 = std::max(s.lo[2], bz), z1 = std::min(s.hi[2], bz + B - 1);
     const int32_t y0 = std::max(s.lo[1], by), y1 = std::min(s.hi[1], by + B - 1);
     const float* a = s.a;
-    const float gn[6] = {s.n[0] * s.n[0], s.n[0] * s.n[1], s.n[0] * s.n[2], s.n[1] * s.n[1], s.n[1] * s.n[2], s.n[2] * s.n[2]};
-    size_t updates = 0;
-    float g[64];
     // Block-local float coordinates: the splat's centre relative to the block's first voxel.
     const float cx = static_cast<float>(s.p[0] - bx), cy = static_cast<float>(s.p[1] - by), cz = static_cast<float>(s.p[2] - bz);
     const int32_t lx_lo = std::max(s.lo[0] - bx, 0), lx_hi = std::min(s.hi[0] - bx, B - 1);
-    const float a0 = a[0], inv_a0 = 1.0f / a[0];
+    const float a0 = a[0], a1 = a[1], a2 = a[2], a3 = a[3], a4 = a[4], a5 = a[5], inv_a0 = 1.0f / a0;
+    const float fB = static_cast<float>(B);
+    const float gn[6] = {s.n[0] * s.n[0], s.n[0] * s.n[1], s.n[0] * s.n[2], s.n[1] * s.n[1], s.n[1] * s.n[2], s.n[2] * s.n[2]};
+    const f8 iota = {0, 1, 2, 3, 4, 5, 6, 7};
+    const i8 iota_i = {0, 1, 2, 3, 4, 5, 6, 7};
+    float* args = args_.data();
+    int32_t* voxel = voxel_.data();
+    int32_t* row_step = row_step_.data();
+    float* heads = heads_.data();
+    Rows& r = rows_;
+
+    // 1a. The candidate rows (y, z): the splat's box in the block.
+    int candidates = 0;
     for (int32_t z = z0; z <= z1; ++z) {
-      const float dz = static_cast<float>(z - bz) + 0.5f - cz;
-      const float qb_z = a[2] * dz, qc_y = 2.0f * a[4] * dz, qc_z = a[5] * dz * dz;
-      for (int32_t y = y0; y <= y1; ++y) {
-        const float dy = static_cast<float>(y - by) + 0.5f - cy;
-        const float qb = a[1] * dy + qb_z;
-        const float qc = (a[3] * dy + qc_y) * dy + qc_z;
-        const float disc = qb * qb - a0 * (qc - support2);
-        if (disc < 0) continue;
-        const float root = std::sqrt(disc);
-        // The row's voxels lx with centre lx + 0.5 inside the ellipsoid, within the splat's box.
-        const float xlo = std::clamp(cx + (-qb - root) * inv_a0 - 0.5f, -1.0f, static_cast<float>(B));
-        const float xhi = std::clamp(cx + (-qb + root) * inv_a0 - 0.5f, -1.0f, static_cast<float>(B));
-        int32_t lx0 = static_cast<int32_t>(xlo), lx1 = static_cast<int32_t>(xhi);
-        lx0 += static_cast<float>(lx0) < xlo;  // ceil
-        lx1 -= static_cast<float>(lx1) > xhi;  // floor
-        lx0 = std::max(lx0, lx_lo);
-        lx1 = std::min(lx1, lx_hi);
-        if (lx0 > lx1) continue;
-        const int32_t x0 = bx + lx0;
-        const int count = lx1 - lx0 + 1;
-        const int padded = (count + kLanes - 1) / kLanes * kLanes;
-        const float dx0 = static_cast<float>(lx0) + 0.5f - cx;
-        const float w = s.w;
-#pragma omp simd
-        for (int i = 0; i < padded; ++i) {
-          const float dx = dx0 + static_cast<float>(i);
-          g[i] = w * exp_nonpositive(std::max(-80.0f, -0.5f * (qc + (2.0f * qb + a0 * dx) * dx)));
-        }
-        for (int i = count; i < padded; ++i) g[i] = 0.0f;
-        // A (x - p) at the row's first voxel; it grows by A's first column per step.
-        const float adx0 = a[0] * dx0 + a[1] * dy + a[2] * dz;
-        const float ady0 = a[1] * dx0 + a[3] * dy + a[4] * dz;
-        const float adz0 = a[2] * dx0 + a[4] * dy + a[5] * dz;
-        const size_t v0 = static_cast<size_t>(((z - bz) * B + (y - by)) * B + (x0 - bx));
-        const size_t V = stride_;
-        float* __restrict f = acc_.data() + v0;
-        float* __restrict fl = f;
-        float* __restrict fgx = f + 1 * V;
-        float* __restrict fgy = f + 2 * V;
-        float* __restrict fgz = f + 3 * V;
-        float* __restrict ft0 = f + 4 * V;
-        float* __restrict ft1 = f + 5 * V;
-        float* __restrict ft2 = f + 6 * V;
-        float* __restrict ft3 = f + 7 * V;
-        float* __restrict ft4 = f + 8 * V;
-        float* __restrict ft5 = f + 9 * V;
-        float* __restrict fn0 = f + 10 * V;
-        float* __restrict fn1 = f + 11 * V;
-        float* __restrict fn2 = f + 12 * V;
-        const float a1 = a[1], a2 = a[2], n0 = s.n[0], n1 = s.n[1], n2 = s.n[2];
-#pragma omp simd
-        for (int i = 0; i < padded; ++i) {
-          const float gi = g[i], fi = static_cast<float>(i);
-          fl[i] += gi;
-          fgx[i] -= gi * (adx0 + a0 * fi);
-          fgy[i] -= gi * (ady0 + a1 * fi);
-          fgz[i] -= gi * (adz0 + a2 * fi);
-          ft0[i] += gi * gn[0];
-          ft1[i] += gi * gn[1];
-          ft2[i] += gi * gn[2];
-          ft3[i] += gi * gn[3];
-          ft4[i] += gi * gn[4];
-          ft5[i] += gi * gn[5];
-          fn0[i] += gi * n0;
-          fn1[i] += gi * n1;
-          fn2[i] += gi * n2;
-        }
-        if (colour) {
-          float* __restrict fw = f + 13 * V;
-          float* __restrict fr = f + 14 * V;
-          float* __restrict fg = f + 15 * V;
-          float* __restrict fb = f + 16 * V;
-          const float r0 = s.rgb[0], g0 = s.rgb[1], b0 = s.rgb[2];
-#pragma omp simd
-          for (int i = 0; i < padded; ++i) {
-            const float gi = g[i];
-            fw[i] += gi;
-            fr[i] += gi * r0;
-            fg[i] += gi * g0;
-            fb[i] += gi * b0;
-          }
-        }
-        std::memset(touched_.data() + v0, 1, static_cast<size_t>(count));
-        updates += static_cast<size_t>(count);
-      }
+      const int n = y1 - y0 + 1;
+      const i8 ly = (y0 - by) + iota_i, lz = i8{} + (z - bz);
+      int c = 0;
+      do {  // eight at a time; the next z writes over the surplus
+        const i8 y8 = ly + c;
+        std::memcpy(r.y.data() + candidates + c, &y8, sizeof y8);
+        std::memcpy(r.z.data() + candidates + c, &lz, sizeof lz);
+        c += kLanes;
+      } while (c < n);
+      candidates += std::max(n, 0);
     }
-    return updates;
+    // 1b. Their voxels lx with centre lx + 0.5 inside the ellipsoid, within the splat's box, and
+    // A (x - p) at the first (it grows by A's first column per step), eight rows at a time.
+    const int lanes = (candidates + kLanes - 1) / kLanes * kLanes;
+#pragma omp simd
+    for (int k = 0; k < lanes; ++k) {
+      const float dz = static_cast<float>(r.z[k]) + 0.5f - cz;
+      const float qb_z = a2 * dz, qc_y = 2.0f * a4 * dz, qc_z = a5 * dz * dz;
+      const float dy = static_cast<float>(r.y[k]) + 0.5f - cy;
+      const float qb = a1 * dy + qb_z;
+      const float qc = (a3 * dy + qc_y) * dy + qc_z;
+      r.qb[k] = qb;
+      r.qc[k] = qc;
+      r.disc[k] = qb * qb - a0 * (qc - support2);
+    }
+#if defined(__x86_64__)
+    for (int k = 0; k < lanes; k += 4)
+      _mm_storeu_ps(r.root.data() + k, _mm_sqrt_ps(_mm_max_ps(_mm_loadu_ps(r.disc.data() + k), _mm_setzero_ps())));
+#else
+    for (int k = 0; k < lanes; ++k) r.root[k] = std::sqrt(std::max(r.disc[k], 0.0f));
+#endif
+#pragma omp simd
+    for (int k = 0; k < lanes; ++k) {
+      const float qb = r.qb[k], root = r.root[k];
+      const float xlo = std::min(std::max(cx + (-qb - root) * inv_a0 - 0.5f, -1.0f), fB);
+      const float xhi = std::min(std::max(cx + (-qb + root) * inv_a0 - 0.5f, -1.0f), fB);
+      int32_t lx0 = static_cast<int32_t>(xlo), lx1 = static_cast<int32_t>(xhi);
+      lx0 += static_cast<int32_t>(static_cast<float>(lx0) < xlo);  // ceil
+      lx1 -= static_cast<int32_t>(static_cast<float>(lx1) > xhi);  // floor
+      lx0 = std::max(lx0, lx_lo);
+      lx1 = std::min(lx1, lx_hi);
+      const int32_t keep = static_cast<int32_t>(r.disc[k] >= 0.0f) & static_cast<int32_t>(k < candidates);
+      r.count[k] = std::max(lx1 - lx0 + 1, 0) * keep;
+      r.lx0[k] = lx0;
+      r.row[k] = r.z[k] * B + r.y[k];
+      const float dx0 = static_cast<float>(lx0) + 0.5f - cx;
+      const float dy = static_cast<float>(r.y[k]) + 0.5f - cy;
+      const float dz = static_cast<float>(r.z[k]) + 0.5f - cz;
+      r.dx0[k] = dx0;
+      r.ax[k] = -(a0 * dx0 + a1 * dy + a2 * dz);
+      r.ay[k] = -(a1 * dx0 + a3 * dy + a4 * dz);
+      r.az[k] = -(a2 * dx0 + a4 * dy + a5 * dz);
+    }
+    // 1c. The rows with voxels.
+    int rows = 0;
+    for (int k = 0; k < candidates; ++k) {
+      r.kept[rows] = k;
+      rows += r.count[k] > 0;
+    }
+    // 1d. Each row's voxels: eight lanes of exponents, block indices and (row, step) written,
+    // as many kept as the row has.
+    int total = 0;
+    for (int j = 0; j < rows; ++j) {
+      const int k = r.kept[j];
+      const int count = r.count[k], lx0 = r.lx0[k], row = r.row[k];
+      const float dx0 = r.dx0[k], qb = r.qb[k], qc = r.qc[k];
+      float* head = heads + 4 * j;
+      head[0] = 1.0f;
+      head[1] = r.ax[k];
+      head[2] = r.ay[k];
+      head[3] = r.az[k];
+      // The row's voxels in its mask (bit lx), for commit().
+      row_mask_[row] |= ((uint64_t{2} << (count - 1)) - 1) << lx0;
+      const int v0 = row * B + lx0;
+      int c = 0;
+      do {  // eight voxels at a time: once, unless the row is longer
+        const f8 dx = dx0 + (static_cast<float>(c) + iota);
+        const f8 q = -0.5f * (qc + (2.0f * qb + a0 * dx) * dx);
+        const f8 arg = q > -80.0f ? q : -80.0f;
+        const i8 index = v0 + c + iota_i, rs = (j * 64 + c) + iota_i;
+        std::memcpy(args + total, &arg, sizeof arg);
+        std::memcpy(voxel + total, &index, sizeof index);
+        std::memcpy(row_step + total, &rs, sizeof rs);
+        total += std::min(count - c, kLanes);
+        c += kLanes;
+      } while (c < count);
+    }
+    const int padded = (total + kLanes - 1) / kLanes * kLanes;
+    for (int i = total; i < padded; ++i) args[i] = 0.0f;
+    const float w = s.w;
+    float* g = g_.data();
+#pragma omp simd
+    for (int i = 0; i < padded; ++i) g[i] = w * exp_nonpositive(args[i]);
+
+    const f8 step = {0.0f, -a0, -a1, -a2, 0.0f, 0.0f, 0.0f, 0.0f};
+    const f4 n_outer = {gn[0], gn[1], gn[2], gn[3]};
+    const f8 tail = {gn[4], gn[5], s.n[0], s.n[1], s.n[2], s.rgb[0], s.rgb[1], s.rgb[2]};
+    float* __restrict acc = acc_.get();
+    for (int i = 0; i < total; ++i) {
+      float* out = acc + static_cast<size_t>(voxel[i]) * kFields;
+      f4 head;
+      f8 lo, hi;
+      std::memcpy(&head, heads + 4 * (row_step[i] >> 6), sizeof head);
+      std::memcpy(&lo, out, sizeof lo);
+      std::memcpy(&hi, out + 8, sizeof hi);
+      lo += g[i] * (__builtin_shufflevector(head, n_outer, 0, 1, 2, 3, 4, 5, 6, 7) + step * static_cast<float>(row_step[i] & 63));
+      hi += g[i] * tail;
+      std::memcpy(out, &lo, sizeof lo);
+      std::memcpy(out + 8, &hi, sizeof hi);
+    }
+    return static_cast<size_t>(total);
   }
 
-  // Rounds the sums into the block (scale kScale, integers added modulo 2^32) and clears them.
-  void commit(Block& block, int channel) {
-    const size_t V = stride_;
-    int32_t* surface = block.surface.data();
-    int32_t* colour = channel >= 0 ? block.channels[channel].data() : nullptr;
-    const float S = static_cast<float>(kScale);
-    for (size_t v = 0; v < static_cast<size_t>(voxels_); ++v) {
-      if (!touched_[v]) continue;
-      touched_[v] = 0;
-      int32_t* out = surface + v * kSurfaceFields;
-      for (int k = 0; k < kSurfaceFields; ++k) {
-        float& x = acc_[k * V + v];
-        add(out[k], static_cast<int32_t>(std::lrint(x * S)));
-        x = 0.0f;
+  // Rounds the sums into the block (scale kScale, to nearest, integers added modulo 2^32) and
+  // clears them; the bricks with written voxels get memory in the block first.
+  void commit(Block& block, int channel, BrickPool* pool) {
+    const int B = shape_.edge, nb = shape_.bricks_per_edge;
+    const uint64_t nibble = (uint64_t{1} << kBrickEdge) - 1;
+    touched_.clear();
+    for (int cz = 0; cz < nb; ++cz)
+      for (int cy = 0; cy < nb; ++cy) {
+        uint64_t m = 0;
+        for (int z = cz * kBrickEdge; z < std::min(B, (cz + 1) * kBrickEdge); ++z)
+          for (int y = cy * kBrickEdge; y < std::min(B, (cy + 1) * kBrickEdge); ++y) m |= row_mask_[z * B + y];
+        for (int cx = 0; cx < nb; ++cx)
+          if ((m >> (cx * kBrickEdge)) & nibble) touched_.push_back((cz * nb + cy) * nb + cx);
       }
-      for (int k = 0; k < kChannelFields; ++k) {
-        float& x = acc_[(kSurfaceFields + k) * V + v];
-        if (colour) add(colour[v * kChannelFields + k], static_cast<int32_t>(std::lrint(x * S)));
-        x = 0.0f;
-      }
+    if (touched_.empty()) return;
+    block.surface.allocate(shape_, kSurfaceFields, touched_, pool);
+    BrickArray* colour = nullptr;
+    if (channel >= 0) {
+      colour = &block.channel(static_cast<uint32_t>(channel));
+      colour->allocate(shape_, kChannelFields, touched_, nullptr);
     }
+    constexpr size_t kBrickSurfaceBytes = static_cast<size_t>(kBrickVoxels) * kSurfaceFields * sizeof(int32_t);
+    for (size_t t = 0; t < touched_.size(); ++t) {
+      const int b = touched_[t];
+      int32_t* surface = block.surface.brick(b);
+      int32_t* rgb = colour ? colour->brick(b) : nullptr;
+      if (t + 1 < touched_.size()) {  // the next brick's integers on their way while this one is summed
+        const char* next = reinterpret_cast<const char*>(block.surface.brick(touched_[t + 1]));
+        for (size_t o = 0; o < kBrickSurfaceBytes; o += 64) __builtin_prefetch(next + o, 1);
+      }
+      const int x0 = b % nb * kBrickEdge, y0 = b / nb % nb * kBrickEdge, z0 = b / nb / nb * kBrickEdge;
+      const int x1 = std::min(x0 + kBrickEdge, B), y1 = std::min(y0 + kBrickEdge, B), z1 = std::min(z0 + kBrickEdge, B);
+      for (int z = z0; z < z1; ++z)
+        for (int y = y0; y < y1; ++y) {
+          if (!((row_mask_[z * B + y] >> x0) & nibble)) continue;  // nothing written in this row of the brick
+          for (int x = x0; x < x1; ++x) {
+            float* in = acc_.get() + ((static_cast<size_t>(z) * B + y) * B + x) * kFields;
+            const int v = BlockShape::in_brick(x, y, z);
+            add_rounded(in, surface + v * kSurfaceFields, rgb ? rgb + v * kChannelFields : nullptr);
+            std::memset(in, 0, kFields * sizeof(float));
+          }
+        }
+    }
+    std::fill(row_mask_.begin(), row_mask_.end(), 0);
   }
 
  private:
-  int edge_;
+  // Adds the 16 sums of one voxel times kScale, rounded to the nearest integer (ties to even,
+  // as std::lrint, saturated at +-2^31: a single mesh would need ~30000 head-on views of one
+  // voxel), to its 13 surface integers and, when `rgb`, its 4 colour integers (the weight is L's).
+  static void add_rounded(const float* in, int32_t* surface, int32_t* rgb) {
+    const float S = static_cast<float>(kScale), top = 2147483520.0f;  // the largest float below 2^31
+#if defined(__x86_64__)
+    const __m128 s = _mm_set1_ps(S), hi = _mm_set1_ps(top), lo = _mm_set1_ps(-top);
+    __m128i r[4];
+    for (int k = 0; k < 4; ++k) r[k] = _mm_cvtps_epi32(_mm_min_ps(_mm_max_ps(_mm_mul_ps(_mm_loadu_ps(in + 4 * k), s), lo), hi));
+    for (int k = 0; k < 3; ++k) {
+      __m128i* out = reinterpret_cast<__m128i*>(surface + 4 * k);
+      _mm_storeu_si128(out, _mm_add_epi32(_mm_loadu_si128(out), r[k]));
+    }
+    add(surface[12], _mm_cvtsi128_si32(r[3]));
+    if (rgb) {  // (L, r, g, b): field 0, then fields 13..15
+      const __m128i c = _mm_castps_si128(_mm_move_ss(_mm_castsi128_ps(r[3]), _mm_castsi128_ps(r[0])));
+      __m128i* out = reinterpret_cast<__m128i*>(rgb);
+      _mm_storeu_si128(out, _mm_add_epi32(_mm_loadu_si128(out), c));
+    }
+#else
+    int32_t r[kFields];
+    for (int k = 0; k < kFields; ++k) r[k] = static_cast<int32_t>(std::lrint(std::clamp(in[k] * S, -top, top)));
+    for (int k = 0; k < kSurfaceFields; ++k) add(surface[k], r[k]);
+    if (rgb) {
+      add(rgb[0], r[0]);
+      for (int k = 0; k < 3; ++k) add(rgb[1 + k], r[kSurfaceFields + k]);
+    }
+#endif
+  }
+
+  struct Free {
+    void operator()(float* p) const { std::free(p); }
+  };
+
+  BlockShape shape_;
   int voxels_;
-  size_t stride_;  // floats per field array
-  std::vector<float> acc_;
-  std::vector<uint8_t> touched_;
+  std::unique_ptr<float, Free> acc_;  // voxels * kFields, 64-byte aligned
+  // One splat's voxels in the block: exponent, Gaussian, block index, row, steps from its start.
+  std::vector<float> args_, g_;
+  std::vector<int32_t> voxel_, row_step_;  // row_step: row * 64 + steps from the row's start
+  // One splat's candidate rows in the block (structure of arrays).
+  struct Rows {
+    explicit Rows(size_t n)
+        : y(n), z(n), lx0(n), count(n), row(n), kept(n), qb(n), qc(n), disc(n), root(n), dx0(n), ax(n), ay(n), az(n) {}
+    std::vector<int32_t> y, z, lx0, count, row, kept;
+    std::vector<float> qb, qc, disc, root, dx0, ax, ay, az;
+  };
+  Rows rows_;
+  std::vector<float> heads_;           // per row: (1, -A (x - p)) at its start
+  std::vector<uint64_t> row_mask_;     // per row (y, z) of the block: voxels written since the last commit
+  std::vector<int> touched_;
 };
 
 // ---- extraction ----
@@ -553,6 +912,7 @@ struct Scratch {
 void extract_block(const BlockKey& key, const std::array<const Block*, 8>& blocks, const GridDefinition& def,
                    const ExtractParams& params, Scratch& scratch, BlockMesh& out) {
   const int B = def.block_edge_voxels, P = B + 1;
+  const BlockShape shape(B);
   const size_t P3 = static_cast<size_t>(P) * P * P;
   scratch.samples.resize(P3);
   if (scratch.edge_vertex.size() != P3 * 3) scratch.edge_vertex.assign(P3 * 3, -1);
@@ -563,14 +923,15 @@ void extract_block(const BlockKey& key, const std::array<const Block*, 8>& block
         const int nb = (lx == B ? 1 : 0) | (ly == B ? 2 : 0) | (lz == B ? 4 : 0);
         Sample& s = scratch.samples[(static_cast<size_t>(lz) * P + ly) * P + lx];
         const Block* b = blocks[nb];
-        if (!b) {
+        const int x = lx % B, y = ly % B, z = lz % B;
+        const int32_t* raw = b ? b->surface.voxel(shape, kSurfaceFields, x, y, z) : nullptr;
+        if (!raw) {  // no evidence there
           s = Sample{};
           continue;
         }
-        const size_t v = static_cast<size_t>(((lz % B) * B + (ly % B)) * B + (lx % B));
         colours.clear();
-        for (const auto& ch : b->channels) colours.push_back(ch.empty() ? nullptr : ch.data() + v * kChannelFields);
-        derive(b->surface.data() + v * kSurfaceFields, colours, params.min_likelihood, params.color, s);
+        for (const auto& ch : b->channels) colours.push_back(ch.bricks.voxel(shape, kChannelFields, x, y, z));
+        derive(raw, colours, params.min_likelihood, params.color, s);
       }
   const auto& table = mc::cases();
   const double h = def.voxel_size_m;
@@ -635,13 +996,9 @@ void extract_block(const BlockKey& key, const std::array<const Block*, 8>& block
 
 // ---- GridDefinition ----
 
-size_t GridDefinition::block_surface_bytes() const {
-  return static_cast<size_t>(block_edge_voxels) * block_edge_voxels * block_edge_voxels * kSurfaceFields *
-         sizeof(int32_t);
-}
+size_t GridDefinition::block_surface_bytes() const { return BlockShape(block_edge_voxels).full_bytes(kSurfaceFields); }
 size_t GridDefinition::block_channel_bytes() const {
-  return static_cast<size_t>(block_edge_voxels) * block_edge_voxels * block_edge_voxels * kChannelFields *
-         sizeof(int32_t);
+  return BlockShape(block_edge_voxels).full_bytes(kChannelFields) + sizeof(Channel);
 }
 
 bool GridDefinition::operator==(const GridDefinition& o) const {
@@ -772,8 +1129,31 @@ GridDefinition GridDefinition::from_json(const std::string& text) {
 
 // ---- OccupancyGrid ----
 
+namespace {
+
+struct SurfaceSample {
+  Eigen::Vector3d p;    // mesh frame
+  Eigen::Vector3d n;    // mesh frame
+  Eigen::Vector3f rgb;  // [0, 1]
+  double area = 0;      // [m^2] of surface the sample stands for
+};
+
+// distribute()'s working memory, kept for the next call: fresh memory is slow to come by (page
+// faults), and meshes of one grid are mostly alike in size.
+struct DistributeScratch {
+  std::vector<SurfaceSample> samples;
+  std::vector<Splat> splats;
+  std::vector<uint8_t> state;
+  std::vector<uint32_t> flat;    // splat indices per block (distribute's bins)
+  std::vector<uint32_t> counts;  // the bins' counting sort
+  std::vector<std::unique_ptr<BlockAccumulator>> accumulators;  // per thread
+};
+
+}  // namespace
+
 struct OccupancyGrid::Impl {
   Impl(const GridDefinition& d, BlockStore& s) : def(d), store(s), cache(s, def) {}
+  DistributeScratch scratch;
   GridDefinition def;
   BlockStore& store;
   BlockCache cache;
@@ -830,13 +1210,9 @@ DistributeResult OccupancyGrid::distribute(const TriangleMesh& mesh, const Trans
   const bool has_faces = !mesh.faces.empty();
   const bool has_colour = mesh.colors.size() == vertex_count || (!mesh.texture.empty() && mesh.uv.size() == vertex_count);
   const int channel = !has_colour ? -1 : (def.channels == ChannelMode::kShared ? 0 : mesh_index);
-  struct SurfaceSample {
-    Eigen::Vector3d p;    // mesh frame
-    Eigen::Vector3d n;    // mesh frame
-    Eigen::Vector3f rgb;  // [0, 1]
-    double area = 0;      // [m^2] of surface the sample stands for
-  };
-  std::vector<SurfaceSample> samples(vertex_count);
+  auto& samples = impl_->scratch.samples;
+  samples.clear();
+  samples.resize(vertex_count);
   for (size_t i = 0; i < vertex_count; ++i) {
     samples[i].p = mesh.vertices[i].cast<double>();
     samples[i].n = normals[i].cast<double>();
@@ -909,8 +1285,11 @@ DistributeResult OccupancyGrid::distribute(const TriangleMesh& mesh, const Trans
       bound_hi[k] = static_cast<int32_t>(std::min(kMaxVoxelIndex, std::ceil(def.bounds_m->max()[k] / h) - 1));
     }
   }
-  std::vector<Splat> splats(n);
-  std::vector<uint8_t> state(n, 0);  // 0 used, 1 oblique, 2 outside, 3 too far, 4 no area
+  auto& splats = impl_->scratch.splats;
+  splats.clear();
+  splats.resize(n);
+  auto& state = impl_->scratch.state;  // 0 used, 1 oblique, 2 outside, 3 too far, 4 no area
+  state.assign(n, 0);
   const double support = def.support_sigmas;
 #pragma omp parallel for schedule(static)
   for (size_t i = 0; i < n; ++i) {
@@ -959,6 +1338,8 @@ DistributeResult OccupancyGrid::distribute(const TriangleMesh& mesh, const Trans
       const double e = support * std::sqrt(C(k, k));
       s.lo[k] = std::max(bound_lo[k], static_cast<int32_t>(std::ceil(pv[k] - e - 0.5)));
       s.hi[k] = std::min(bound_hi[k], static_cast<int32_t>(std::floor(pv[k] + e - 0.5)));
+      s.block_lo[k] = static_cast<int32_t>(floor_div(s.lo[k], def.block_edge_voxels));
+      s.block_hi[k] = static_cast<int32_t>(floor_div(s.hi[k], def.block_edge_voxels));
       outside = outside || s.lo[k] > s.hi[k];
       s.n[k] = static_cast<float>(nrm[k]);
       s.rgb[k] = samples[i].rgb[k];
@@ -983,69 +1364,231 @@ DistributeResult OccupancyGrid::distribute(const TriangleMesh& mesh, const Trans
 
   // ---- bin by block ----
   DistributeResult result;
-  const int B = def.block_edge_voxels;
-  std::unordered_map<BlockKey, std::vector<uint32_t>, BlockKeyHash> bins;
+  BlockCache& cache = impl_->cache;
+  const BlockShape& shape = cache.shape();
+  // Bins: the splats of each block touched, in ascending splat order (the order of the sums),
+  // as ranges of one flat list; bin_keys ascending. A counting sort over the box of block keys
+  // the mesh touches, in parallel (each thread counts, then places, one range of splats); over a
+  // very large box, a hash map instead, serially.
+  auto& flat = impl_->scratch.flat;
+  std::vector<BlockKey> bin_keys;
+  std::vector<uint32_t> bin_begin;  // bin b: flat[bin_begin[b], bin_begin[b + 1])
+  int32_t key_lo[3] = {INT32_MAX, INT32_MAX, INT32_MAX}, key_hi[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
+  size_t pairs = 0;
   for (size_t i = 0; i < n; ++i) {
-    if (state[i] == 1) {
-      ++result.skipped_oblique;
-      continue;
-    }
-    if (state[i] == 2) {
-      ++result.skipped_outside;
-      continue;
-    }
-    if (state[i] == 4) continue;
+    if (state[i] == 1) ++result.skipped_oblique;
+    else if (state[i] == 2) ++result.skipped_outside;
+    if (state[i] != 0) continue;
     ++result.points;
     const Splat& s = splats[i];
-    for (int64_t bz = floor_div(s.lo[2], B); bz <= floor_div(s.hi[2], B); ++bz)
-      for (int64_t by = floor_div(s.lo[1], B); by <= floor_div(s.hi[1], B); ++by)
-        for (int64_t bx = floor_div(s.lo[0], B); bx <= floor_div(s.hi[0], B); ++bx)
-          bins[BlockKey{static_cast<int32_t>(bx), static_cast<int32_t>(by), static_cast<int32_t>(bz)}].push_back(
-              static_cast<uint32_t>(i));
+    size_t count = 1;
+    for (int k = 0; k < 3; ++k) {
+      key_lo[k] = std::min(key_lo[k], s.block_lo[k]);
+      key_hi[k] = std::max(key_hi[k], s.block_hi[k]);
+      count *= static_cast<size_t>(s.block_hi[k] - s.block_lo[k] + 1);
+    }
+    pairs += count;
   }
-  std::vector<BlockKey> keys;
-  keys.reserve(bins.size());
-  for (const auto& [key, list] : bins) keys.push_back(key);
-  std::sort(keys.begin(), keys.end());
-  result.blocks_touched = keys.size();
+  flat.resize(pairs);
+  const int64_t extent[3] = {int64_t{key_hi[0]} - key_lo[0] + 1, int64_t{key_hi[1]} - key_lo[1] + 1,
+                             int64_t{key_hi[2]} - key_lo[2] + 1};
+  const int64_t cells = result.points == 0 ? 0 : extent[0] * extent[1] * extent[2];
+  if (cells > 0 && cells <= std::min<int64_t>(int64_t{1} << 22, 16 * static_cast<int64_t>(result.points) + 4096)) {
+    // Cell of a key: x-major, so that ascending cells are ascending keys.
+    auto cell_of = [&](int32_t x, int32_t y, int32_t z) {
+      return static_cast<size_t>(((int64_t{x} - key_lo[0]) * extent[1] + (y - key_lo[1])) * extent[2] + (z - key_lo[2]));
+    };
+    const int threads = omp_get_max_threads();
+    auto& counts = impl_->scratch.counts;  // [thread][cell]
+    counts.assign(static_cast<size_t>(cells) * threads, 0);
+    int team = 1;
+#pragma omp parallel num_threads(threads)
+    {
+      const int t = omp_get_thread_num();
+#pragma omp single
+      team = omp_get_num_threads();
+      const size_t first = n * t / team, last = n * (t + 1) / team;
+      auto each_key = [&](auto&& f) {
+        for (size_t i = first; i < last; ++i) {
+          if (state[i] != 0) continue;
+          const Splat& s = splats[i];
+          for (int32_t x = s.block_lo[0]; x <= s.block_hi[0]; ++x)
+            for (int32_t y = s.block_lo[1]; y <= s.block_hi[1]; ++y)
+              for (int32_t z = s.block_lo[2]; z <= s.block_hi[2]; ++z) f(i, static_cast<size_t>(t) * cells + cell_of(x, y, z));
+        }
+      };
+      each_key([&](size_t, size_t slot) { ++counts[slot]; });
+#pragma omp barrier
+#pragma omp single
+      {
+        uint32_t at = 0;
+        for (size_t c = 0; c < static_cast<size_t>(cells); ++c) {
+          const uint32_t start = at;
+          for (int u = 0; u < team; ++u) {
+            const uint32_t m = counts[static_cast<size_t>(u) * cells + c];
+            counts[static_cast<size_t>(u) * cells + c] = at;
+            at += m;
+          }
+          if (at == start) continue;
+          const int64_t x = static_cast<int64_t>(c) / (extent[1] * extent[2]), rest = static_cast<int64_t>(c) % (extent[1] * extent[2]);
+          bin_keys.push_back(BlockKey{static_cast<int32_t>(key_lo[0] + x), static_cast<int32_t>(key_lo[1] + rest / extent[2]),
+                                      static_cast<int32_t>(key_lo[2] + rest % extent[2])});
+          bin_begin.push_back(start);
+        }
+        bin_begin.push_back(at);
+      }
+      each_key([&](size_t i, size_t slot) { flat[counts[slot]++] = static_cast<uint32_t>(i); });
+    }
+  } else if (cells > 0) {
+    std::map<BlockKey, uint32_t> count_of;
+    for (size_t i = 0; i < n; ++i) {
+      if (state[i] != 0) continue;
+      const Splat& s = splats[i];
+      for (int32_t x = s.block_lo[0]; x <= s.block_hi[0]; ++x)
+        for (int32_t y = s.block_lo[1]; y <= s.block_hi[1]; ++y)
+          for (int32_t z = s.block_lo[2]; z <= s.block_hi[2]; ++z) ++count_of[BlockKey{x, y, z}];
+    }
+    uint32_t at = 0;
+    for (auto& [key, m] : count_of) {
+      bin_keys.push_back(key);
+      bin_begin.push_back(at);
+      const uint32_t start = at;
+      at += m;
+      m = start;
+    }
+    bin_begin.push_back(at);
+    for (size_t i = 0; i < n; ++i) {
+      if (state[i] != 0) continue;
+      const Splat& s = splats[i];
+      for (int32_t x = s.block_lo[0]; x <= s.block_hi[0]; ++x)
+        for (int32_t y = s.block_lo[1]; y <= s.block_hi[1]; ++y)
+          for (int32_t z = s.block_lo[2]; z <= s.block_hi[2]; ++z) flat[count_of[BlockKey{x, y, z}]++] = static_cast<uint32_t>(i);
+    }
+  }
+  std::vector<uint32_t> order(bin_keys.size());
+  for (uint32_t k = 0; k < order.size(); ++k) order[k] = k;
+  result.blocks_touched = order.size();
   // Blocks already in the cache first: under a budget smaller than the grid, the previous mesh
   // left the tail of its pass resident, and a plain key-order pass would evict it before use.
-  std::stable_partition(keys.begin(), keys.end(), [&](const BlockKey& k) { return impl_->cache.resident(k); });
+  std::stable_partition(order.begin(), order.end(), [&](uint32_t k) { return cache.resident(bin_keys[k]) != nullptr; });
+
+  // What each block can grow by: the bricks its splats' boxes cover, and new brick tables.
+  const bool colour = channel >= 0;
+  const size_t brick_bytes = BrickArray::brick_bytes(kSurfaceFields, &cache.pool()) +
+                             (colour ? BrickArray::brick_bytes(kChannelFields, nullptr) : 0);
+  const size_t table_bytes = shape.bricks * sizeof(void*) * (colour ? 2 : 1) + (colour ? sizeof(Channel) : 0);
+  std::vector<size_t> growth(order.size());
+  // Under a budget that every block at its fullest fits (in memory), that bound will do.
+  const size_t fullest = shape.full_bytes(kSurfaceFields) + (colour ? shape.full_bytes(kChannelFields) + sizeof(Channel) : 0);
+  const bool roomy = cache.stats().resident_bytes + order.size() * fullest <= def.memory_budget_bytes;
+  if (roomy) std::fill(growth.begin(), growth.end(), fullest);
+#pragma omp parallel if (!roomy)
+  if (!roomy) {
+    std::vector<uint64_t> rows(static_cast<size_t>(shape.bricks_per_edge) * shape.bricks_per_edge);
+#pragma omp for schedule(dynamic, 16)
+    for (size_t j = 0; j < order.size(); ++j) {
+      std::fill(rows.begin(), rows.end(), 0);
+      for (uint32_t k = bin_begin[order[j]]; k < bin_begin[order[j] + 1]; ++k)
+        mark_bricks(shape, splats[flat[k]], bin_keys[order[j]], rows);
+      size_t bricks = 0;
+      for (uint64_t r : rows) bricks += static_cast<size_t>(std::popcount(r));
+      growth[j] = bricks * brick_bytes + table_bytes;
+    }
+  }
 
   // ---- apply, in batches that fit the budget ----
-  BlockCache& cache = impl_->cache;
   const float support2 = static_cast<float>(support * support);
-  const size_t block_estimate = def.block_surface_bytes() + (channel >= 0 ? def.block_channel_bytes() : 0);
   size_t next = 0;
   std::vector<Block*> batch;
-  std::vector<std::unique_ptr<BlockAccumulator>> accumulators(omp_get_max_threads());
-  while (next < keys.size()) {
-    batch.clear();
-    size_t pinned = 0;
-    while (next < keys.size()) {
-      const size_t estimate = std::max(block_estimate, cache.max_block_bytes());
-      if (!batch.empty() && pinned + estimate > def.memory_budget_bytes) break;
-      cache.make_room(estimate);
-      Block* b = cache.pin(keys[next], true);
-      if (channel >= 0) cache.ensure_channel(b, channel);
-      b->dirty = true;
-      pinned += b->bytes();
-      batch.push_back(b);
+  std::vector<size_t> load_estimate;
+  std::vector<std::optional<std::vector<uint8_t>>> stored;
+  std::vector<std::unique_ptr<Block>> fresh;
+  auto& accumulators = impl_->scratch.accumulators;
+  if (accumulators.size() < static_cast<size_t>(omp_get_max_threads())) accumulators.resize(omp_get_max_threads());
+  while (next < order.size()) {
+    // Plan: blocks in order while their present size, what loading them adds and their growth
+    // fit the budget (at least one).
+    const size_t first = next;
+    size_t planned = 0;
+    while (next < order.size()) {
+      const BlockKey& key = bin_keys[order[next]];
+      const Block* r = cache.resident(key);
+      const size_t need = (r ? r->accounted : cache.load_estimate(key)) + growth[next];
+      if (next > first && planned + need > def.memory_budget_bytes) break;
+      planned += need;
       ++next;
     }
-    const size_t first = next - batch.size();
+    // Pin the resident ones (room is not made by evicting them), reserve room for the rest and
+    // for the growth, evict, then load.
+    batch.assign(next - first, nullptr);
+    load_estimate.assign(next - first, 0);
+    size_t reserved = 0;
+    for (size_t j = 0; j < batch.size(); ++j) {
+      const BlockKey& key = bin_keys[order[first + j]];
+      if (cache.resident(key)) batch[j] = cache.pin(key, true);
+      else load_estimate[j] = cache.load_estimate(key);
+      reserved += load_estimate[j] + growth[first + j];
+    }
+    cache.reserve(reserved);
+    // Evict, then read the absent blocks' stored bytes in turn (the store serves one thread at
+    // a time); they are decoded in the parallel loop, and join the cache after it.
+    stored.assign(batch.size(), std::nullopt);
+    fresh.clear();
+    fresh.resize(batch.size());
+    try {
+      cache.make_room(0);
+      for (size_t j = 0; j < batch.size(); ++j)
+        if (!batch[j]) stored[j] = cache.load_bytes(bin_keys[order[first + j]]);
+    } catch (...) {
+      for (Block* b : batch)
+        if (b) cache.unpin(b);
+      cache.release(reserved);
+      throw;
+    }
     size_t updates = 0;
+    std::exception_ptr error;
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : updates)
     for (size_t j = 0; j < batch.size(); ++j) {
-      const BlockKey& key = keys[first + j];
-      zero_if_new(*batch[j]);
-      auto& acc = accumulators[omp_get_thread_num()];
-      if (!acc) acc = std::make_unique<BlockAccumulator>(B);
-      for (uint32_t i : bins.at(key)) updates += acc->splat(splats[i], key, support2, channel >= 0);
-      acc->commit(*batch[j], channel);
+      try {
+        const uint32_t bin = order[first + j];
+        Block* block = batch[j];
+        if (!block) {
+          fresh[j] = stored[j] ? std::make_unique<Block>(decode_block(*stored[j], shape, bin_keys[bin], &cache.pool()))
+                               : std::make_unique<Block>();
+          stored[j].reset();
+          block = fresh[j].get();
+        }
+        auto& acc = accumulators[omp_get_thread_num()];
+        if (!acc) acc = std::make_unique<BlockAccumulator>(shape);
+        for (uint32_t k = bin_begin[bin]; k < bin_begin[bin + 1]; ++k) updates += acc->splat(splats[flat[k]], bin_keys[bin], support2);
+        acc->commit(*block, channel, &cache.pool());
+      } catch (...) {
+#pragma omp critical(artisan_grid_apply)
+        if (!error) error = std::current_exception();
+      }
+    }
+    for (size_t j = 0; j < batch.size(); ++j)
+      if (!batch[j] && fresh[j]) {
+        batch[j] = cache.insert_pinned(bin_keys[order[first + j]], std::move(fresh[j]));
+        cache.release(load_estimate[j]);  // its real size is counted now
+      }
+    if (error) {  // a corrupt stored block: the batch's other blocks keep this mesh's evidence
+      for (Block* b : batch)
+        if (b) {
+          b->dirty = true;
+          cache.recount(b);
+          cache.unpin(b);
+        }
+      cache.release(reserved);
+      std::rethrow_exception(error);
     }
     result.voxel_updates += updates;
-    for (Block* b : batch) cache.unpin(b);
+    for (Block* b : batch) {
+      b->dirty = true;
+      cache.recount(b);
+      cache.unpin(b);
+    }
+    cache.release(reserved);
   }
   cache.make_room(0);
   result.seconds = seconds_since(t0);
@@ -1079,19 +1622,20 @@ ExtractResult OccupancyGrid::extract(const ExtractParams& params) {
     while (next < keys.size()) {
       const BlockKey& key = keys[next];
       std::array<BlockKey, 8> around;
-      size_t missing = 0;
+      size_t estimate = 0;  // bytes the block's neighbourhood adds to the batch
       for (int c = 0; c < 8; ++c) {
         around[c] = BlockKey{key.x + (c & 1), key.y + ((c >> 1) & 1), key.z + ((c >> 2) & 1)};
-        missing += present.count(around[c]) && !batch_pins.count(around[c]);
+        if (!present.count(around[c]) || batch_pins.count(around[c])) continue;
+        const Block* r = cache.resident(around[c]);
+        estimate += r ? r->accounted : cache.load_estimate(around[c]);
       }
-      const size_t estimate = missing * cache.max_block_bytes();
       if (!batch_blocks.empty() && pinned_bytes + estimate > def.memory_budget_bytes) break;
       std::array<const Block*, 8> blocks{};
       for (int c = 0; c < 8; ++c) {
         if (!present.count(around[c])) continue;
         auto it = batch_pins.find(around[c]);
         if (it == batch_pins.end()) {
-          cache.make_room(cache.max_block_bytes());
+          cache.make_room(cache.load_estimate(around[c]));
           Block* b = cache.pin(around[c], false);
           it = batch_pins.emplace(around[c], b).first;
           if (b) {

@@ -86,6 +86,7 @@ std::vector<ObjectTruth> object_truth(Renderer& renderer, const Workcell& cell, 
     ObjectTruth o;
     o.instance_id = b.instance_id;
     o.name = b.name;
+    o.model = b.model;
     o.role = b.role;
     o.T_world_object = b.T_world_body;
     o.visible_pixels = visible[b.instance_id];
@@ -155,7 +156,7 @@ void write_acquisition(const Acquisition& a, const fs::path& dir) {
   j["joint_values"] = t.joint_values;
   json objects = json::array();
   for (const auto& o : t.objects)
-    objects.push_back({{"instance_id", o.instance_id}, {"name", o.name}, {"role", to_string(o.role)},
+    objects.push_back({{"instance_id", o.instance_id}, {"name", o.name}, {"model", o.model}, {"role", to_string(o.role)},
                        {"T_world_object", pose_json(o.T_world_object)}, {"visible_pixels", o.visible_pixels},
                        {"unoccluded_pixels", o.unoccluded_pixels}, {"visible_fraction", o.visible_fraction}});
   j["objects"] = objects;

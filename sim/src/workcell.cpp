@@ -237,7 +237,7 @@ struct Loader {
     Body b;
     b.role = role;
     b.name = string(j.value("name", json()), field + ".name", *this);
-    const std::set<std::string> known{"name", "primitive", "mesh", "scale", "pose", "look_at", "material", "drop", "mass_kg"};
+    const std::set<std::string> known{"name", "model", "primitive", "mesh", "scale", "pose", "look_at", "material", "drop", "mass_kg"};
     for (auto it = j.begin(); it != j.end(); ++it)
       if (!known.count(it.key())) fail(field + "." + it.key(), "unknown field");
     if (j.contains("primitive") == j.contains("mesh")) fail(field, "needs exactly one of 'primitive' and 'mesh'");
@@ -246,6 +246,7 @@ struct Loader {
     } else {
       const fs::path p = resolve_package(string(j["mesh"], field + ".mesh", *this), dir, field + ".mesh");
       b.mesh = mesh_file(p, field + ".mesh");
+      if (!j.contains("scale")) b.model = p.stem().string();
       b.shape.kind = CollisionShape::Kind::mesh;
     }
     if (j.contains("scale")) {
@@ -257,6 +258,7 @@ struct Loader {
       for (auto& v : b.mesh.vertices) v = v.cwiseProduct(s.cast<float>());
       b.mesh.compute_vertex_normals();
     }
+    if (j.contains("model")) b.model = string(j["model"], field + ".model", *this);
     b.T_world_body = pose(j, field, *this);
     b.material = material(j.value("material", json()), field + ".material");
     if (j.contains("drop")) b.drop = boolean(j["drop"], field + ".drop", *this);

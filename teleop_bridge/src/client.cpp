@@ -40,6 +40,7 @@ struct SceneClient::Impl {
   int64_t revision = -1;
   std::string folder, service_id;
   std::map<int64_t, RemoteObject> objects;
+  std::vector<artisan::robot_state_t> robots;
   std::map<std::string, std::shared_ptr<const TriangleMesh>> meshes;
   // A mesh being fetched: the chunks so far, and the ones asked for and not yet arrived.
   struct Transfer {
@@ -67,6 +68,7 @@ struct SceneClient::Impl {
     if (s->revision < revision && s->service_id == service_id) return;  // an old one
     objects.clear();
     for (const auto& o : s->objects) objects[o.object_id] = remote(o);
+    robots = s->robots;
     revision = s->revision;
     folder = s->folder;
     service_id = s->service_id;
@@ -80,6 +82,7 @@ struct SceneClient::Impl {
     if (!has_scene || d->base_revision != revision || d->service_id != service_id) return;
     for (const auto& o : d->changed) objects[o.object_id] = remote(o);
     for (int64_t id : d->removed) objects.erase(id);
+    if (d->robots_changed) robots = d->robots;
     revision = d->revision;
     ++updates;
   }
@@ -183,6 +186,17 @@ int64_t SceneClient::revision() const { return impl_->revision; }
 std::string SceneClient::folder() const { return impl_->folder; }
 std::string SceneClient::service_id() const { return impl_->service_id; }
 const std::map<int64_t, RemoteObject>& SceneClient::objects() const { return impl_->objects; }
+const std::vector<artisan::robot_state_t>& SceneClient::robots() const { return impl_->robots; }
+
+void SceneClient::set_robot(artisan::query_t& q, const std::string& robot, const std::map<std::string, double>& joints) {
+  q.robot = robot.empty() ? "*" : robot;
+  q.joint_names.clear();
+  q.joint_values.clear();
+  for (const auto& [name, value] : joints) {
+    q.joint_names.push_back(name);
+    q.joint_values.push_back(value);
+  }
+}
 size_t SceneClient::meshes_fetched() const { return impl_->meshes.size(); }
 int64_t SceneClient::updates_received() const { return impl_->updates; }
 
@@ -193,6 +207,8 @@ artisan::query_reply_t SceneClient::query(artisan::query_t q, double timeout_s) 
   q.n_shapes = int32_t(q.shapes.size());
   q.n_allowed = int32_t(q.allowed.size());
   q.n_rays = int32_t(q.rays.size());
+  q.n_joint_names = int32_t(q.joint_names.size());
+  q.n_joint_values = int32_t(q.joint_values.size());
   impl_->lcm.publish(kQueryChannel, &q);
   const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
   while (Clock::now() < end) {

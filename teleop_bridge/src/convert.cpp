@@ -56,6 +56,26 @@ artisan::scene_object_t to_lcm(const worldmodel::SceneObject& o) {
   return m;
 }
 
+artisan::robot_state_t to_lcm(const worldmodel::SceneRobot& r) {
+  artisan::robot_state_t m;
+  m.object_id = r.object_id;
+  m.version = r.version;
+  m.name = r.name;
+  m.path = r.path;
+  m.root_pose = to_lcm(r.T_world_root);
+  for (const auto& name : r.model->joint_names()) {
+    m.joint_names.push_back(name);
+    m.joint_values.push_back(r.joints.at(name));
+  }
+  m.n_joints = int32_t(m.joint_names.size());
+  for (const auto& [link, T] : r.T_world_links) {
+    m.link_names.push_back(link);
+    m.link_poses.push_back(to_lcm(T));
+  }
+  m.n_links = int32_t(m.link_names.size());
+  return m;
+}
+
 worldmodel::QueryShape from_lcm(const artisan::shape_t& s, const std::vector<Eigen::Vector3f>* hull_points) {
   using worldmodel::QueryShape;
   QueryShape q;

@@ -33,6 +33,7 @@ double seconds_since(Clock::time_point t) { return std::chrono::duration<double>
 constexpr int kMaxShapes = 1024;
 constexpr int kMaxRays = 100000;
 constexpr int kMaxAllowed = 4096;
+constexpr int kMaxJoints = 256;
 
 template <typename Msg>
 bool decode(const lcm::ReceiveBuffer* rbuf, Msg& msg) {
@@ -78,6 +79,8 @@ struct Service::Impl {
       s.objects.push_back(std::move(m));
     }
     s.n_objects = int32_t(s.objects.size());
+    for (const auto& r : world.robots()) s.robots.push_back(to_lcm(r));
+    s.n_robots = int32_t(s.robots.size());
     lcm.publish(kSceneChannel, &s);
     last_snapshot = Clock::now();
   }
@@ -99,6 +102,10 @@ struct Service::Impl {
     d.n_changed = int32_t(d.changed.size());
     d.removed = changes.removed;
     d.n_removed = int32_t(d.removed.size());
+    d.robots_changed = changes.robots;
+    if (changes.robots)
+      for (const auto& r : world.robots()) d.robots.push_back(to_lcm(r));
+    d.n_robots = int32_t(d.robots.size());
     lcm.publish(kSceneDiffChannel, &d);
   }
 
@@ -118,8 +125,9 @@ struct Service::Impl {
       artisan::environment_reading_t r;
       r.utime = now_utime();
       r.image_path = o.path;
-      const auto p = e.value("position_m", std::vector<double>{0, 0, 0});
-      for (size_t k = 0; k < 3 && k < p.size(); ++k) r.position[k] = p[k];
+      // Where the rig was: the translation of T_world_rig (row-major 4x4: elements 3, 7, 11).
+      const auto T = e.value("T_world_rig", std::vector<double>{});
+      for (int k = 0; k < 3; ++k) r.position[k] = T.size() == 16 ? T[size_t(4 * k + 3)] : 0.0;
       r.dose_rate_uSv_per_h = e.value("dose_rate_uSv_per_h", 0.0);
       r.temperature_C = e.value("temperature_C", 0.0);
       r.humidity_percent = e.value("humidity_percent", 0.0);
@@ -179,9 +187,10 @@ struct Service::Impl {
     r.in_collision = false;
     r.min_distance = 0;
     try {
-      if (q.n_shapes > kMaxShapes || q.n_rays > kMaxRays || q.n_allowed > kMaxAllowed)
+      if (q.n_shapes > kMaxShapes || q.n_rays > kMaxRays || q.n_allowed > kMaxAllowed || q.n_joint_names > kMaxJoints ||
+          q.n_joint_values > kMaxJoints)
         throw Error("too large: at most " + std::to_string(kMaxShapes) + " shapes, " + std::to_string(kMaxRays) + " rays, " +
-                    std::to_string(kMaxAllowed) + " allowed pairs");
+                    std::to_string(kMaxAllowed) + " allowed pairs, " + std::to_string(kMaxJoints) + " joints");
       std::vector<worldmodel::QueryShape> shapes;
       for (const auto& s : q.shapes) {
         const std::vector<Eigen::Vector3f>* hull = nullptr;
@@ -189,6 +198,14 @@ struct Service::Impl {
           for (const auto& o : world.objects())
             if (o.mesh_hash == s.mesh_hash) hull = &o.mesh->vertices;
         shapes.push_back(from_lcm(s, hull));
+      }
+      // The robot at the joints asked for: its links (and what it carries) join the shapes.
+      if (!q.robot.empty() || q.n_joint_values > 0 || q.n_joint_names > 0) {
+        if (q.type != artisan::query_t::COLLISION && q.type != artisan::query_t::DISTANCE)
+          throw Error("a robot configuration goes with COLLISION and DISTANCE queries, not with query type " + std::to_string(int(q.type)));
+        const std::string robot = q.robot == "*" ? "" : q.robot;
+        const auto joints = world.joint_values(robot, q.joint_names, q.joint_values);
+        for (auto& s : world.robot_shapes({robot, joints})) shapes.push_back(std::move(s));
       }
       std::vector<worldmodel::AllowedPair> allowed;
       for (const auto& a : q.allowed) allowed.push_back(from_lcm(a));

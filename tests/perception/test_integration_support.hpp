@@ -1,16 +1,21 @@
 #pragma once
 // Shared by the integration tests and bench_integration: the ten bunny scans meshed and placed at
 // their bun.conf poses, surface sampling and point-to-surface accuracy against a reference.
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <cmath>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
+#include "artisan/core/error.hpp"
 #include "artisan/core/io/ply.hpp"
 #include "artisan/core/io/stanford_conf.hpp"
 #include "artisan/perception/integration.hpp"
@@ -103,28 +108,56 @@ inline MergeAccuracy merge_accuracy(const TriangleMesh& merged, const TriangleMe
   return a;
 }
 
-/// Blocks as files in a folder, so they do not count in the process's resident memory.
+/// Blocks on disk, so they do not count in the process's resident memory: one file in `dir`,
+/// each store appended to it, an index in memory saying where every block's latest bytes are.
+/// (One file per block made the file system's inode allocation, not the grid, the main cost of
+/// a paged run.)
 class FileBlockStore final : public BlockStore {
  public:
-  explicit FileBlockStore(std::filesystem::path dir) : dir_(std::move(dir)) {}
+  explicit FileBlockStore(const std::filesystem::path& dir) : path_(dir / "blocks.pack") {
+    fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_TRUNC, 0644);
+    if (fd_ < 0) throw Error("FileBlockStore: cannot open " + path_.string());
+  }
+  ~FileBlockStore() override { ::close(fd_); }
+  FileBlockStore(const FileBlockStore&) = delete;
+  FileBlockStore& operator=(const FileBlockStore&) = delete;
+
   std::optional<std::vector<uint8_t>> load(const BlockKey& key) override {
-    std::ifstream in(path(key), std::ios::binary);
-    if (!in) return std::nullopt;
-    return std::vector<uint8_t>(std::istreambuf_iterator<char>(in), {});
+    const auto it = index_.find(key);
+    if (it == index_.end()) return std::nullopt;
+    std::vector<uint8_t> bytes(it->second.size);
+    for (size_t done = 0; done < bytes.size();) {
+      const ssize_t n = ::pread(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(it->second.offset + done));
+      if (n <= 0) throw Error("FileBlockStore: cannot read " + path_.string());
+      done += static_cast<size_t>(n);
+    }
+    return bytes;
   }
   void store(const BlockKey& key, const std::vector<uint8_t>& bytes) override {
-    std::ofstream out(path(key), std::ios::binary | std::ios::trunc);
-    out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-    keys_.push_back(key);
+    for (size_t done = 0; done < bytes.size();) {
+      const ssize_t n = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(end_ + done));
+      if (n <= 0) throw Error("FileBlockStore: cannot write " + path_.string());
+      done += static_cast<size_t>(n);
+    }
+    index_[key] = Extent{end_, bytes.size()};
+    end_ += bytes.size();
   }
-  std::vector<BlockKey> keys() override { return keys_; }  // may repeat; the grid deduplicates
+  std::vector<BlockKey> keys() override {
+    std::vector<BlockKey> out;
+    out.reserve(index_.size());
+    for (const auto& [key, extent] : index_) out.push_back(key);
+    return out;
+  }
 
  private:
-  std::filesystem::path path(const BlockKey& k) const {
-    return dir_ / (std::to_string(k.x) + "_" + std::to_string(k.y) + "_" + std::to_string(k.z));
-  }
-  std::filesystem::path dir_;
-  std::vector<BlockKey> keys_;
+  struct Extent {
+    uint64_t offset = 0;
+    size_t size = 0;
+  };
+  std::filesystem::path path_;
+  int fd_ = -1;
+  uint64_t end_ = 0;
+  std::map<BlockKey, Extent> index_;
 };
 
 /// The full-resolution grid mesh of a range image (two triangles per 2x2 block of valid pixels,

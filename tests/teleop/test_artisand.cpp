@@ -1,6 +1,7 @@
 // artisand as a process, its clients in other processes, over real UDP multicast inside a
 // private network namespace (nothing can leave the machine): scene from LCM alone, the
-// `artisan teleop` client, malformed messages, lcm-logger/lcm-logplayer, SIGTERM and restart.
+// `artisan teleop` client (with a robot checked at joint values), malformed messages,
+// lcm-logger/lcm-logplayer, SIGTERM and restart.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/prctl.h>
@@ -66,6 +67,10 @@ TEST(Artisand, AcrossProcessesInAPrivateNetworkNamespace) {
     auto ws = worldmodel::Workspace::create(db);
     f = test::make_world_fixture(ws);
   }
+  // A UR5 5 cm above the floor, its arm out straight (by the command line, as an operator would).
+  const auto set = test::run_command(std::string(ARTISAN_CLI) + " --db " + db + " robot set /cell --urdf '" + test::ur5_urdf().string() +
+                                     "' --package-path '" + test::robot_packages().string() + "' --pose '0.3 0.3 0.05 0 0 0 1' --author setup");
+  ASSERT_EQ(set.exit_code, 0) << set.err;
   const std::string artisand = bin_dir() + "/artisand", cli = ARTISAN_CLI;
   pid_t service = spawn({artisand, "--db", db, "--folder", "/cell", "--lcm-url", kUrl, "--snapshot-period", "0.5", "--poll-period", "0.2"});
 
@@ -105,6 +110,29 @@ TEST(Artisand, AcrossProcessesInAPrivateNetworkNamespace) {
   auto unknown = test::run_command(cli + " teleop --lcm-url '" + kUrl + "' grasps 4242");
   EXPECT_EQ(unknown.exit_code, 1);
   EXPECT_NE(unknown.err.find("4242"), std::string::npos) << unknown.err;
+
+  // The robot: in the scene with its joints, checked at other joints by the command-line client.
+  EXPECT_EQ(nlohmann::json::parse(scene.out)["robots"][0]["joints"]["shoulder_lift_joint"], 0.0);
+  const std::string check = cli + " --json teleop --lcm-url '" + kUrl + "' check ";
+  auto down = test::run_command(check + "--joints shoulder_lift_joint=1.5708");  // the arm down through the floor
+  ASSERT_EQ(down.exit_code, 0) << down.err;
+  auto j = nlohmann::json::parse(down.out);
+  EXPECT_TRUE(j["in_collision"]);
+  ASSERT_GE(j["contacts"].size(), 1u);
+  EXPECT_EQ(j["contacts"][0]["shape"].get<std::string>().rfind("ur5/", 0), 0u) << down.out;
+  EXPECT_EQ(j["contacts"][0]["object_id"], f.environment);
+  auto allowed = test::run_command(check + "--joints shoulder_lift_joint=1.5708 --allow '*@" + std::to_string(f.environment) + "'");
+  ASSERT_EQ(allowed.exit_code, 0) << allowed.err;
+  EXPECT_FALSE(nlohmann::json::parse(allowed.out)["in_collision"]);
+  auto straight = test::run_command(check + "--robot ur5");
+  ASSERT_EQ(straight.exit_code, 0) << straight.err;
+  j = nlohmann::json::parse(straight.out);
+  EXPECT_FALSE(j["in_collision"]);
+  EXPECT_GT(j["clearance_m"].get<double>(), 0.0);
+  EXPECT_EQ(j["closest"]["shape"].get<std::string>().rfind("ur5/", 0), 0u) << straight.out;
+  auto bad_joint = test::run_command(check + "--joints elbow=1");
+  EXPECT_EQ(bad_joint.exit_code, 1);
+  EXPECT_NE(bad_joint.err.find("'elbow'"), std::string::npos) << bad_joint.err;
 
   // Record a session with lcm-logger while the operator corrects a pose.
   const auto log = (dir / "session.lcm").string();

@@ -1,12 +1,16 @@
 // The world-model service and its client in one process over LCM's memq:// transport: scene from
-// LCM alone (late joiners too), queries, commands, malformed messages, restart.
+// LCM alone (late joiners too), queries, commands, malformed messages, restart; a robot's joint
+// values in the scene and queries for the robot at given joints; environmental readings placed
+// where the rig was.
 #include <gtest/gtest.h>
 
 #include "artisan/core/error.hpp"
+#include "artisan/environment_reading_t.hpp"
 #include "artisan/service_error_t.hpp"
 #include "artisan/teleop_bridge/channels.hpp"
 #include "artisan/teleop_bridge/client.hpp"
 #include "artisan/teleop_bridge/service.hpp"
+#include "artisan/worldmodel/robot_store.hpp"
 #include "worldmodel/world_fixture.hpp"
 
 namespace artisan::teleop {
@@ -228,6 +232,165 @@ TEST_F(ServiceTest, CommandsChangeTheSceneForEveryClientAndSurviveARestart) {
   while (carol.objects().count(f.bunny) && std::chrono::steady_clock::now() < end) carol.pump(20);
   EXPECT_FALSE(carol.objects().count(f.bunny));
   EXPECT_GT(carol.revision(), seen);
+}
+
+// The UR5 standing 5 cm above the floor of the fixture, beside the bunny, its arm out straight.
+class RobotServiceTest : public ServiceTest {
+ protected:
+  const Transform T_world_root = Transform(Eigen::Translation3d(-0.2, 0.3, 0.05));
+  worldmodel::ObjectId robot = 0;
+  void SetUp() override {
+    worldmodel::RobotSetRequest set;
+    set.folder = "/cell";
+    set.urdf = test::ur5_urdf();
+    set.package_paths = {test::robot_packages()};
+    set.T_world_root = T_world_root;
+    set.joints = {{"shoulder_pan_joint", 0.2}};
+    set.author = "alice";
+    robot = worldmodel::set_robot(ws, set);
+  }
+};
+
+// Method: the scene the client rebuilds carries the robot with the joint values stored in the
+// workspace and its link poses (checked against RobotModel's kinematics); a query with the
+// shoulder lowered into the floor collides (the links' shapes, against the environment), the arm
+// out straight does not, and its distance is the world model's own answer; a change of the
+// joints in the workspace reaches the client as a diff.
+TEST_F(RobotServiceTest, TheRobotIsInTheSceneAndQueriesTakeItsJoints) {
+  start();
+  SceneClient client(lcm, "operator", pump());
+  ASSERT_TRUE(client.wait_for_scene(10, false));
+  ASSERT_EQ(client.robots().size(), 1u);
+  const auto& r = client.robots()[0];
+  EXPECT_EQ(r.name, "ur5");
+  EXPECT_EQ(r.object_id, robot);
+  ASSERT_EQ(r.n_joints, 6);
+  EXPECT_EQ(r.joint_names[0], "shoulder_pan_joint");
+  EXPECT_EQ(r.joint_values[0], 0.2);
+  const auto ur5 = worldmodel::RobotModel::load(test::ur5_urdf(), {test::robot_packages()});
+  const auto truth = ur5.link_poses({{"shoulder_pan_joint", 0.2}}, T_world_root);
+  ASSERT_EQ(size_t(r.n_links), truth.size());
+  for (size_t k = 0; k < size_t(r.n_links); ++k) {
+    const Transform& T = truth.at(r.link_names[k]);
+    const auto& p = r.link_poses[k];
+    EXPECT_LT((Eigen::Vector3d(p.position[0], p.position[1], p.position[2]) - T.translation()).norm(), 1e-12) << r.link_names[k];
+    const Eigen::Quaterniond q(p.quaternion_xyzw[3], p.quaternion_xyzw[0], p.quaternion_xyzw[1], p.quaternion_xyzw[2]);
+    EXPECT_LT(q.angularDistance(Eigen::Quaterniond(T.rotation())), 1e-9) << r.link_names[k];
+  }
+
+  artisan::query_t q;
+  q.type = artisan::query_t::COLLISION;
+  SceneClient::set_robot(q, "", {{"shoulder_lift_joint", M_PI / 2}});  // the arm down through the floor
+  auto reply = client.query(q);
+  ASSERT_TRUE(reply.ok) << reply.error;
+  EXPECT_TRUE(reply.in_collision);
+  ASSERT_GE(reply.n_contacts, 1);
+  for (const auto& c : reply.contacts) {
+    EXPECT_EQ(c.shape.rfind("ur5/", 0), 0u) << c.shape;
+    EXPECT_EQ(c.object_id, f.environment);
+  }
+  // Allowed: the robot's links may touch the environment.
+  artisan::allowed_pair_t allow;
+  allow.shape = "*";
+  allow.object_id = f.environment;
+  q.allowed = {allow};
+  EXPECT_FALSE(client.query(q).in_collision);
+  q.allowed.clear();
+  SceneClient::set_robot(q, "ur5", {});  // at its current joints: out straight, above the floor
+  reply = client.query(q);
+  ASSERT_TRUE(reply.ok) << reply.error;
+  EXPECT_FALSE(reply.in_collision);
+  // Every joint by position, no names.
+  q.robot = "";
+  q.joint_names.clear();
+  q.joint_values = {0.2, 0.0, 0.0, 0.0, 0.0, 0.0};
+  EXPECT_FALSE(client.query(q).in_collision);
+  q.type = artisan::query_t::DISTANCE;
+  q.max_distance = 1.0;
+  reply = client.query(q);
+  ASSERT_TRUE(reply.ok) << reply.error;
+  const auto d = service->world().robot_distance({"", {{"shoulder_pan_joint", 0.2}}}, 1.0);
+  EXPECT_NEAR(reply.min_distance, d.distance_m, 1e-12);
+  EXPECT_GT(reply.min_distance, 0.0);
+  ASSERT_EQ(reply.n_contacts, 1);
+  EXPECT_EQ(reply.contacts[0].shape.rfind("ur5/", 0), 0u);
+
+  // Someone moves the arm in the workspace: the diff carries the robot.
+  worldmodel::RobotSetRequest move;
+  move.folder = "/cell";
+  move.joints = {{"elbow_joint", 0.5}};
+  move.author = "bob";
+  worldmodel::set_robot(ws, move);
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (client.robots().at(0).version != 2 && std::chrono::steady_clock::now() < end) client.pump(20);
+  ASSERT_EQ(client.robots().at(0).version, 2);
+  EXPECT_EQ(client.robots().at(0).joint_values[2], 0.5);
+  EXPECT_EQ(client.robots().at(0).joint_values[0], 0.2);
+}
+
+TEST_F(RobotServiceTest, BadRobotQueriesAreRefusedNamingWhatIsWrong) {
+  start();
+  SceneClient client(lcm, "operator", pump());
+  ASSERT_TRUE(client.wait_for_scene(10, false));
+  artisan::query_t q;
+  q.type = artisan::query_t::COLLISION;
+  const auto refused = [&](const std::string& what) {
+    const auto r = client.query(q);
+    EXPECT_FALSE(r.ok) << what;
+    EXPECT_NE(r.error.find(what), std::string::npos) << r.error;
+  };
+  SceneClient::set_robot(q, "", {{"elbow", 1.0}});
+  refused("'elbow'");
+  SceneClient::set_robot(q, "", {{"elbow_joint", NAN}});
+  refused("not finite");
+  SceneClient::set_robot(q, "", {{"elbow_joint", 9.0}});
+  refused("limits");
+  SceneClient::set_robot(q, "ur10", {});
+  refused("ur10");
+  q.robot = "";
+  q.joint_names.clear();
+  q.joint_values = {0.1, 0.2, 0.3};
+  refused("6 joints");
+  q.joint_names = {"elbow_joint", "wrist_1_joint"};
+  refused("2 joint name(s) but 3");
+  q.type = artisan::query_t::RAYCAST;
+  SceneClient::set_robot(q, "", {});
+  refused("COLLISION and DISTANCE");
+  // Still answering.
+  q.type = artisan::query_t::COLLISION;
+  SceneClient::set_robot(q, "", {});
+  EXPECT_TRUE(client.query(q).ok);
+}
+
+// Method: two acquisitions stored with environmental readings (as `artisan acquire` stores them:
+// T_world_rig row-major) are published once each, at the translation of T_world_rig.
+TEST_F(ServiceTest, EnvironmentalReadingsArePublishedWhereTheRigWas) {
+  struct Sink {
+    std::vector<artisan::environment_reading_t> readings;
+    void on(const lcm::ReceiveBuffer*, const std::string&, const artisan::environment_reading_t* r) { readings.push_back(*r); }
+  } sink;
+  lcm.subscribe(kEnvironmentChannel, &Sink::on, &sink);
+  const Transform T_world_rig = Transform(Eigen::Translation3d(-1.2, -1.2, 1.45)) * Eigen::AngleAxisd(0.8, Eigen::Vector3d::UnitZ());
+  for (int k = 0; k < 2; ++k) {
+    RangeImage image = RangeImage::empty_of_size(2, 2);
+    auto o = worldmodel::make_image_object("scan" + std::to_string(k), image, {"acquire", {}, {}});
+    const auto m = to_row_major(Transform(Eigen::Translation3d(0, 0, 0.1 * k)) * T_world_rig);
+    o.metadata["environment"] = {{"time_s", 1.0}, {"dose_rate_uSv_per_h", 0.5 + k}, {"temperature_C", 21.0}, {"humidity_percent", 40.0},
+                                 {"T_world_rig", std::vector<double>(m.begin(), m.end())}};
+    ws.add(ws.folder("/cell").id, o);
+  }
+  start();
+  SceneClient client(lcm, "operator", pump());
+  ASSERT_TRUE(client.wait_for_scene(10, false));
+  for (int i = 0; i < 20; ++i) client.pump(10);
+  ASSERT_EQ(sink.readings.size(), 2u);
+  for (const auto& r : sink.readings) {
+    const int k = r.image_path == "/cell/scan1" ? 1 : 0;
+    EXPECT_NEAR(r.position[0], -1.2, 1e-12);
+    EXPECT_NEAR(r.position[1], -1.2, 1e-12);
+    EXPECT_NEAR(r.position[2], 1.45 + 0.1 * k, 1e-12);
+    EXPECT_EQ(r.dose_rate_uSv_per_h, 0.5 + k);
+  }
 }
 
 }  // namespace

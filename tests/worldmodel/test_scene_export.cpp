@@ -1,12 +1,17 @@
-// Scene export: URDF read back by urdfdom, glTF read back by assimp, SDF checked by its poses.
+// Scene export: URDF read back by urdfdom, glTF read back by assimp, SDF checked by its poses; a
+// robot in the URDF read back as a robot whose kinematics and collision geometry match the stored
+// one.
 #include <gtest/gtest.h>
 #include <urdf_parser/urdf_parser.h>
 
 #include <fstream>
+#include <random>
 #include <sstream>
 
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/mesh_io.hpp"
+#include "artisan/worldmodel/robot_model.hpp"
+#include "artisan/worldmodel/robot_store.hpp"
 #include "artisan/worldmodel/scene_export.hpp"
 #include "world_fixture.hpp"
 
@@ -95,6 +100,62 @@ TEST_F(SceneExportTest, CommandLine) {
   EXPECT_NE(r.err.find("/nowhere"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir / "bad"));
   EXPECT_EQ(test::run_command(cli + "export-scene /cell --format vrml --out " + (dir / "bad").string()).exit_code, 2);
+}
+
+// Method: the exported scene.urdf, loaded as a robot (RobotModel, meshes found relative to the
+// file), puts every link of the UR5 where the stored robot puts it, at random joint values within
+// limits (the scene's "world" is its root), and its collision hulls have the same vertices up to
+// the STL's float precision.
+TEST_F(SceneExportTest, TheRobotIsInTheUrdfWithItsKinematics) {
+  const Transform T_world_root = parse_transform("0.62 0.3 0.8 0 0 0.70710678 0.70710678");
+  RobotSetRequest set;
+  set.folder = "/cell";
+  set.urdf = test::ur5_urdf();
+  set.package_paths = {test::robot_packages()};
+  set.T_world_root = T_world_root;
+  set.joints = {{"elbow_joint", 1.0}};
+  set.author = "test";
+  set_robot(ws, set);
+  WorldModel wm(ws, "/cell");
+  export_scene(wm, SceneFormat::urdf, dir / "urdf");
+  const auto text = slurp(dir / "urdf" / "scene.urdf");
+  EXPECT_NE(text.find("elbow_joint=1"), std::string::npos);  // the current joints, as a comment
+  const auto exported = RobotModel::load(dir / "urdf" / "scene.urdf");
+  const auto& stored = *wm.robot().model;
+  std::mt19937 rng(3);
+  for (int trial = 0; trial < 5; ++trial) {
+    std::map<std::string, double> q, q_exported;
+    for (const auto& j : stored.joints())
+      if (j.movable()) {
+        q[j.name] = std::uniform_real_distribution<double>(std::max(j.lower, -3.0), std::min(j.upper, 3.0))(rng);
+        q_exported["ur5_" + j.name] = q[j.name];
+      }
+    const auto truth = stored.link_poses(q, T_world_root);
+    const auto mine = exported.link_poses(q_exported, Transform::Identity());
+    for (const auto& [link, T_world_link] : truth) {
+      ASSERT_TRUE(mine.count("ur5_" + link)) << link;
+      EXPECT_TRUE(mine.at("ur5_" + link).isApprox(T_world_link, 1e-7)) << link;  // rpy and 9 digits in the XML
+    }
+  }
+  const auto a = stored.collision_shapes({}, T_world_root);
+  std::vector<QueryShape> b;  // the robot's links (the scene's environment and objects are links too)
+  for (auto& x : exported.collision_shapes({}, Transform::Identity()))
+    if (x.name.find("/ur5_") != std::string::npos) b.push_back(std::move(x));
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t k = 0; k < a.size(); ++k) {
+    EXPECT_EQ("ur5_" + a[k].name.substr(4), b[k].name.substr(b[k].name.find('/') + 1));
+    EXPECT_EQ(a[k].points.size(), b[k].points.size()) << a[k].name;
+  }
+  // SDF and glTF carry it too.
+  export_scene(wm, SceneFormat::sdf, dir / "sdf");
+  const auto sdf = slurp(dir / "sdf" / "scene.sdf");
+  EXPECT_NE(sdf.find("<model name=\"ur5\">"), std::string::npos);
+  EXPECT_NE(sdf.find("<joint name=\"elbow_joint\" type=\"revolute\">"), std::string::npos);
+  export_scene(wm, SceneFormat::gltf, dir / "gltf");
+  size_t faces = 0;
+  for (const auto& o : wm.objects()) faces += o.mesh->faces.size();
+  for (const auto& [link, mesh] : stored.link_meshes()) faces += mesh->faces.size();
+  EXPECT_EQ(io::read_mesh(dir / "gltf" / "scene.gltf").faces.size(), faces);
 }
 
 }  // namespace

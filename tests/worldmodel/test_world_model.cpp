@@ -1,8 +1,13 @@
 // World model over the workspace: the scene (environment with recognized objects cut out,
-// objects with poses and grasps), its collision scene, and operator edits stored as versions.
+// objects with poses and grasps), its collision scene, operator edits stored as versions, a robot
+// from URDF at its joint values (collision and distance for the robot at any joints, against
+// analytic obstacles and brute force over its link hulls), and the world frame taken from the
+// sensor pose of a MultiMesh's root image.
 #include <gtest/gtest.h>
 
 #include "artisan/core/error.hpp"
+#include "artisan/worldmodel/multimesh.hpp"
+#include "artisan/worldmodel/robot_store.hpp"
 #include "artisan/worldmodel/world_model.hpp"
 #include "world_fixture.hpp"
 
@@ -189,6 +194,334 @@ TEST_F(WorldModelTest, BadRequestsAreRefusedAndChangeNothing) {
   EXPECT_THROW(wm.attach(f.bunny, "", Transform::Identity(), "alice"), Error);
   EXPECT_THROW(WorldModel(ws, "/nowhere"), Error);
   EXPECT_EQ(ws.versions(f.bunny).size(), versions);
+}
+
+// --- robots ---------------------------------------------------------------------------------
+
+// The message of the artisan::Error `fn` throws ("" when it throws none).
+template <typename Fn>
+std::string error_of(Fn&& fn) {
+  try {
+    fn();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// A UR5 standing at the world origin, folded upright (its current joints), in front of a wall
+// whose face is the plane x = kWallX (a 2 cm slab, 6 m x 4 m: larger than the arm's reach, so the
+// distance from a convex hull to it is the smallest x-gap of the hull's vertices); a 10 cm block
+// (a recognized object) placed so that its bottom face cuts through the wrist at `q_hit`.
+class RobotWorldTest : public ::testing::Test {
+ protected:
+  static constexpr double kWallX = 0.6;
+  test::TempDir dir;
+  Workspace ws = Workspace::create(dir / "ws.db");
+  ObjectId environment = 0, block_model = 0, block = 0, robot_id = 0;
+  std::map<std::string, double> q_up = {{"shoulder_lift_joint", -M_PI / 2}, {"wrist_1_joint", -M_PI / 2}};
+  std::map<std::string, double> q_hit = {{"shoulder_pan_joint", M_PI}, {"shoulder_lift_joint", -0.3}, {"elbow_joint", 0.6}};
+  RobotModel ur5 = RobotModel::load(test::ur5_urdf(), {test::robot_packages()});
+  Transform T_world_block = Transform::Identity();
+
+  void SetUp() override {
+    const ObjectId arm = ws.mkdir("/arm");
+    TriangleMesh wall = test::box_mesh({0.02f, 6.0f, 4.0f});
+    wall.transform(Transform(Eigen::Translation3d(kWallX + 0.01, 0, 1.0)));
+    environment = ws.add(arm, make_mesh_object(ObjectKind::kMesh, "merged", "merged", wall, {"merge", {}, {}}));
+    block_model = ws.add(ws.root(), make_mesh_object(ObjectKind::kModel, "", "block", test::box_mesh({0.1f, 0.1f, 0.1f}), {"import", {}, {}}));
+    const Eigen::Vector3d wrist = ur5.link_poses(q_hit, Transform::Identity()).at("wrist_3_link").translation();
+    T_world_block = Transform(Eigen::Translation3d(wrist + Eigen::Vector3d(0, 0, 0.05)));
+    NewObject r;
+    r.kind = ObjectKind::kRecognizedModel;
+    r.subkind = "block";
+    r.name = "block-1";
+    r.metadata = {{"model", "/block"}, {"model_id", block_model}, {"T_scene_model", to_row_major(T_world_block)}};
+    r.provenance = Provenance{"recognize", {}, {environment, block_model}};
+    block = ws.add(arm, r);
+    RobotSetRequest set;
+    set.folder = "/arm";
+    set.urdf = test::ur5_urdf();
+    set.package_paths = {test::robot_packages()};
+    set.T_world_root = Transform::Identity();
+    set.joints = q_up;
+    set.author = "alice";
+    robot_id = set_robot(ws, set);
+  }
+
+  // Brute force: the smallest gap between the wall's face and the vertices of `shapes` (hulls).
+  static double wall_gap(const std::vector<QueryShape>& shapes) {
+    double gap = INFINITY;
+    for (const auto& s : shapes)
+      for (const auto& p : s.points) gap = std::min(gap, kWallX - (s.T_world_shape * p.cast<double>()).x());
+    return gap;
+  }
+  std::map<std::string, double> with(std::map<std::string, double> q, const std::map<std::string, double>& more) const {
+    for (const auto& [k, v] : more) q[k] = v;
+    return q;
+  }
+};
+
+TEST_F(RobotWorldTest, TheRobotIsInTheSceneAtItsJoints) {
+  WorldModel wm(ws, "/arm");
+  ASSERT_EQ(wm.robots().size(), 1u);
+  const auto& r = wm.robot();
+  EXPECT_EQ(&wm.robot("ur5"), &r);
+  EXPECT_EQ(r.name, "ur5");
+  EXPECT_EQ(r.object_id, robot_id);
+  EXPECT_EQ(r.model->joint_names(), ur5.joint_names());
+  EXPECT_EQ(r.joints.at("shoulder_lift_joint"), -M_PI / 2);
+  EXPECT_EQ(r.joints.at("elbow_joint"), 0.0);
+  const auto truth = ur5.link_poses(q_up, Transform::Identity());
+  for (const auto& [link, T] : truth) EXPECT_TRUE(r.T_world_links.at(link).isApprox(T, 1e-12)) << link;
+  // The robot is not a static body: queries for it are made at the joints asked for.
+  EXPECT_EQ(wm.collision().bodies().size(), 2u);  // the wall and the block
+}
+
+// Method: the wrist in the block (its face through the wrist centre) collides, and with the
+// block allowed nothing does; folded upright nothing collides, and the distance to the wall is
+// the brute-force smallest x-gap over the vertices of every link hull (the block excluded).
+TEST_F(RobotWorldTest, WristInABoxCollidesFoldedAwayIsClearAtTheBruteForceDistance) {
+  WorldModel wm(ws, "/arm");
+  const auto hit = wm.check_robot({"", q_hit});
+  ASSERT_TRUE(hit.in_collision);
+  bool wrist = false;
+  for (const auto& c : hit.contacts) {
+    EXPECT_EQ(c.body, block) << c.shape;
+    wrist |= c.shape.rfind("ur5/wrist_", 0) == 0;
+  }
+  EXPECT_TRUE(wrist);
+  EXPECT_FALSE(wm.check_robot({"", q_hit}, {{"*", block}}).in_collision);
+  // Allowing exactly the links that touch it, by name, also clears it.
+  std::vector<AllowedPair> touching;
+  for (const auto& c : hit.contacts) touching.push_back({c.shape, block});
+  EXPECT_FALSE(wm.check_robot({"", q_hit}, touching).in_collision);
+  // Stopping at the first contact agrees.
+  EXPECT_TRUE(wm.check_robot({"", q_hit}, {}, {.stop_at_first = true}).in_collision);
+
+  // Folded upright (the current joints): clear, at the brute-force distance from the wall.
+  EXPECT_FALSE(wm.check_robot({}).in_collision);
+  const std::vector<AllowedPair> not_block = {{"*", block}};
+  const auto d = wm.robot_distance({}, 2.0, not_block);
+  const double truth = wall_gap(ur5.collision_shapes(q_up, Transform::Identity()));
+  EXPECT_GT(truth, 0.3);
+  EXPECT_NEAR(d.distance_m, truth, 1e-4);
+  ASSERT_TRUE(d.closest);
+  EXPECT_EQ(d.closest->body, environment);
+  EXPECT_NEAR(d.closest->point_on_body.x(), kWallX, 1e-4);
+  // Other configurations reaching towards the wall: the same agreement.
+  for (double pan : {0.0, 0.3, -0.4})
+    for (double lift : {-1.2, -0.6}) {
+      const auto q = with(q_up, {{"shoulder_pan_joint", pan}, {"shoulder_lift_joint", lift}});
+      const double bf = wall_gap(ur5.collision_shapes(q, Transform::Identity()));
+      if (bf <= 0.001) continue;  // into the wall: not a distance
+      EXPECT_NEAR(wm.robot_distance({"", q}, 2.0, not_block).distance_m, bf, 1e-4) << pan << " " << lift;
+    }
+}
+
+// Method: the block attached to tool0 is where tool0 is (T_world_tool0 * T_link_object), moves
+// with the joints asked for in a query, and makes the robot collide with the wall where the
+// links alone would not (found by brute force over a sweep of the shoulder); detached, it stays
+// where the robot left it, as a static obstacle.
+TEST_F(RobotWorldTest, AnAttachedObjectMovesWithItsLink) {
+  WorldModel wm(ws, "/arm");
+  const Transform T_link_object(Eigen::Translation3d(0, 0, 0.04));  // its near face 1 cm into the flange
+  wm.attach(block, "ur5/tool0", T_link_object, "bob");
+  const auto* carried = wm.find(block);
+  ASSERT_NE(carried, nullptr);
+  EXPECT_TRUE(carried->T_world_object.isApprox(ur5.link_poses(q_up, Transform::Identity()).at("tool0") * T_link_object, 1e-9));
+  EXPECT_FALSE(wm.collision().contains(block));
+  // In the query shapes, at the joints asked for.
+  const auto q = with(q_up, {{"shoulder_pan_joint", 0.2}, {"shoulder_lift_joint", -1.0}});
+  const auto shapes = wm.robot_shapes({"", q});
+  const auto it = std::find_if(shapes.begin(), shapes.end(), [&](const QueryShape& s) { return s.name == carried->path; });
+  ASSERT_NE(it, shapes.end());
+  EXPECT_TRUE(it->T_world_shape.isApprox(ur5.link_poses(q, Transform::Identity()).at("tool0") * T_link_object, 1e-9));
+  // Distance with the block carried: brute force over the link hulls and the block's corners.
+  EXPECT_NEAR(wm.robot_distance({"", q}, 2.0).distance_m, wall_gap(shapes), 1e-4);
+  // A configuration where the block crosses the wall's face and no link comes within 2 cm of it
+  // (the tool pointing at the wall, the shoulder lowered until the block reaches it).
+  bool found = false;
+  for (double lift = -1.5; lift < 0 && !found; lift += 0.02) {
+    const auto qq = with(q_up, {{"shoulder_pan_joint", 0.0}, {"shoulder_lift_joint", lift}, {"wrist_1_joint", -lift},
+                                {"wrist_2_joint", M_PI / 2}});
+    const auto all = wm.robot_shapes({"", qq});
+    std::vector<QueryShape> links, carried_only;
+    for (const auto& s : all) (s.name == carried->path ? carried_only : links).push_back(s);
+    if (wall_gap(carried_only) > -0.01 || wall_gap(links) < 0.02) continue;
+    found = true;
+    const auto c = wm.check_robot({"", qq});
+    ASSERT_TRUE(c.in_collision) << lift;
+    for (const auto& x : c.contacts) EXPECT_EQ(x.shape, carried->path);
+  }
+  EXPECT_TRUE(found);
+  // Detached: a static obstacle where the robot left it.
+  wm.detach(block, "bob");
+  EXPECT_TRUE(wm.collision().contains(block));
+  EXPECT_TRUE(wm.find(block)->T_world_object.isApprox(ur5.link_poses(q_up, Transform::Identity()).at("tool0") * T_link_object, 1e-9));
+  EXPECT_TRUE(wm.check_robot({}).in_collision);  // it hangs where the tool was
+}
+
+TEST_F(RobotWorldTest, ChangesOfTheRobotAreSeenByRefresh) {
+  WorldModel wm(ws, "/arm");
+  wm.attach(block, "ur5/tool0", Transform::Identity(), "bob");
+  const auto r0 = wm.revision();
+  RobotSetRequest set;
+  set.folder = "/arm";
+  set.joints = {{"shoulder_pan_joint", 1.0}};
+  set.author = "carol";
+  set_robot(ws, set);  // another process moves the arm
+  const auto changes = wm.refresh();
+  EXPECT_TRUE(changes.robots);
+  EXPECT_EQ(changes.changed, std::vector<ObjectId>{block});  // carried along
+  EXPECT_GT(wm.revision(), r0);
+  EXPECT_EQ(wm.robot().joints.at("shoulder_pan_joint"), 1.0);
+  EXPECT_EQ(wm.robot().version, 2);
+  EXPECT_TRUE(wm.find(block)->T_world_object.isApprox(ur5.link_poses(with(q_up, {{"shoulder_pan_joint", 1.0}}), Transform::Identity()).at("tool0"), 1e-9));
+  EXPECT_TRUE(wm.refresh().empty());
+}
+
+TEST_F(RobotWorldTest, BadRobotQueriesAreRefusedNamingWhatIsWrong) {
+  WorldModel wm(ws, "/arm");
+  auto e = error_of([&] { wm.robot_shapes({"", {{"elbow", 1.0}}}); });
+  EXPECT_NE(e.find("'elbow'"), std::string::npos) << e;
+  EXPECT_NE(e.find("elbow_joint"), std::string::npos) << e;
+  e = error_of([&] { wm.check_robot({"", {{"elbow_joint", NAN}}}); });
+  EXPECT_NE(e.find("elbow_joint"), std::string::npos) << e;
+  EXPECT_NE(e.find("not finite"), std::string::npos) << e;
+  e = error_of([&] { wm.robot_distance({"", {{"elbow_joint", 7.0}}}, 1.0); });
+  EXPECT_NE(e.find("limits"), std::string::npos) << e;
+  e = error_of([&] { wm.check_robot({"ur10", {}}); });
+  EXPECT_NE(e.find("ur10"), std::string::npos) << e;
+  EXPECT_NE(e.find("ur5"), std::string::npos) << e;
+  e = error_of([&] { wm.joint_values("", {}, {0.1, 0.2, 0.3}); });
+  EXPECT_NE(e.find("6 joints"), std::string::npos) << e;
+  EXPECT_NE(e.find("got 3"), std::string::npos) << e;
+  e = error_of([&] { wm.joint_values("", {"elbow_joint", "wrist_1_joint"}, {0.1}); });
+  EXPECT_NE(e.find("2 joint name(s) but 1"), std::string::npos) << e;
+  e = error_of([&] { wm.joint_values("", {"elbow_joint", "elbow_joint"}, {0.1, 0.2}); });
+  EXPECT_NE(e.find("twice"), std::string::npos) << e;
+  const auto q = wm.joint_values("", {}, {0.1, 0.2, 0.3, 0.4, 0.5, 0.6});
+  EXPECT_EQ(q.at("wrist_3_joint"), 0.6);
+  EXPECT_EQ(wm.joint_values("", {"elbow_joint"}, {0.5}), (std::map<std::string, double>{{"elbow_joint", 0.5}}));
+  WorldModel none(ws, "/");  // the workspace root holds /arm, so its robot too
+  EXPECT_EQ(none.robots().size(), 1u);
+}
+
+// Method: the environment holds the arm's own scanned surface (its link meshes at the current
+// joints merged into it, as a sensor sees the cell): the robot at those joints collides with its
+// own scan unless the world model cuts the robot out, which it does by default.
+TEST_F(RobotWorldTest, TheRobotsOwnScannedSurfaceIsCutOut) {
+  TriangleMesh scanned = test::box_mesh({0.02f, 6.0f, 4.0f});
+  scanned.transform(Transform(Eigen::Translation3d(kWallX + 0.01, 0, 1.0)));
+  const auto poses = ur5.link_poses(q_up, Transform::Identity());
+  for (const auto& [link, mesh] : ur5.link_meshes()) {
+    TriangleMesh m = *mesh;
+    m.transform(poses.at(link));
+    scanned.append(m);
+  }
+  ws.add_version(environment, make_mesh_object(ObjectKind::kMesh, "merged", "merged", scanned, {"merge", {}, {}}));
+  WorldModelOptions keep;
+  keep.cut_out_robots = false;
+  WorldModel raw(ws, "/arm", keep);
+  EXPECT_TRUE(raw.check_robot({}).in_collision);
+  WorldModel wm(ws, "/arm");
+  EXPECT_FALSE(wm.check_robot({}).in_collision);
+  // The wall is still there.
+  EXPECT_NEAR(wm.robot_distance({}, 2.0, {{"*", block}}).distance_m, wall_gap(ur5.collision_shapes(q_up, Transform::Identity())), 1e-4);
+}
+
+// --- the world frame --------------------------------------------------------------------------
+
+// Method: two floor patches meshed from images, the root image with a known sensor pose, the
+// other registered to it by a known T_parent_member, and a block recognized in the second: the
+// environment's bounds, the block's pose and a merge of the MultiMesh (in the root's frame) all
+// come out at T_world_sensor times their MultiMesh poses. A MultiMesh whose root image knows no
+// pose stays at the identity.
+TEST(WorldFrame, AMultiMeshIsPlacedByItsRootImagesSensorPose) {
+  test::TempDir dir;
+  auto ws = Workspace::create(dir / "ws.db");
+  const Transform T_world_sensor = Transform(Eigen::Translation3d(1.0, -2.0, 1.5)) * Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized());
+  const Transform T_root_b = Transform(Eigen::Translation3d(0.3, 0.1, 0.0)) * Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitZ());
+  const Transform T_b_block(Eigen::Translation3d(0.1, 0.1, 0.3));
+  const auto model = ws.add(ws.root(), make_mesh_object(ObjectKind::kModel, "", "block", test::box_mesh({0.1f, 0.1f, 0.1f}), {"import", {}, {}}));
+  const TriangleMesh patch = test::floor_mesh(4);
+
+  const auto build = [&](const std::string& folder, bool pose_known) {
+    const ObjectId f = ws.mkdir(folder);
+    ObjectId meshes[2];
+    for (int k = 0; k < 2; ++k) {
+      RangeImage image = RangeImage::empty_of_size(2, 2);
+      image.sensor.kind = "simulated";
+      if (pose_known && k == 0) image.sensor.T_world_sensor = T_world_sensor;
+      if (k == 1) image.sensor.T_world_sensor = Transform(Eigen::Translation3d(9, 9, 9));  // not the root: not used
+      const auto id = ws.add(f, make_image_object("view" + std::to_string(k), image, {"sim-scan", {}, {}}));
+      meshes[k] = ws.add(f, make_mesh_object(ObjectKind::kMesh, "original", "view" + std::to_string(k) + "-mesh", patch, {"mesh", {}, {id}}));
+    }
+    const auto mm = create_multimesh(ws, f, "views");
+    const auto root = ws.add_member(mm, {0, meshes[0], std::nullopt, Transform::Identity(), "root", {}});
+    ws.add_member(mm, {0, meshes[1], root, T_root_b, "manual", {}});
+    NewObject r;
+    r.kind = ObjectKind::kRecognizedModel;
+    r.subkind = "block";
+    r.name = "block-in-view1";
+    r.metadata = {{"model", "/block"}, {"model_id", model}, {"T_scene_model", to_row_major(T_b_block)}};
+    r.provenance = Provenance{"recognize", {}, {meshes[1], model}};
+    return std::make_pair(ws.add(f, r), mm);
+  };
+  const auto expected_bounds = [&](const Transform& T_world_root) {
+    Eigen::AlignedBox3d box;
+    for (const auto& v : patch.vertices) {
+      box.extend(T_world_root * v.cast<double>());
+      box.extend(T_world_root * T_root_b * v.cast<double>());
+    }
+    return box;
+  };
+  const auto [block, mm] = build("/posed", true);
+  {
+    WorldModel wm(ws, "/posed");
+    ASSERT_EQ(wm.objects().size(), 2u);
+    const auto box = expected_bounds(T_world_sensor);
+    const auto env = wm.objects()[0].mesh->bounds();
+    EXPECT_LT((env.min().cast<double>() - box.min()).norm(), 1e-5);
+    EXPECT_LT((env.max().cast<double>() - box.max()).norm(), 1e-5);
+    EXPECT_TRUE(wm.find(block)->T_world_object.isApprox(T_world_sensor * T_root_b * T_b_block, 1e-9));
+  }
+  // Merged (in the root member's frame, as `artisan merge` makes it): placed the same way, and so
+  // is an object recognized in it.
+  TriangleMesh merged = patch;
+  merged.append([&] { TriangleMesh b = patch; b.transform(T_root_b); return b; }());
+  const ObjectId f = ws.folder("/posed").id;
+  const auto merged_id = ws.add(f, make_mesh_object(ObjectKind::kMesh, "merged", "views-merged", merged, {"merge", {{"multimesh", mm}}, {mm}}));
+  NewObject r;
+  r.kind = ObjectKind::kRecognizedModel;
+  r.subkind = "block";
+  r.name = "block-in-merged";
+  r.metadata = {{"model", "/block"}, {"model_id", model}, {"T_scene_model", to_row_major(T_root_b * T_b_block)}};
+  r.provenance = Provenance{"recognize", {}, {merged_id, model}};
+  const auto in_merged = ws.add(f, r);
+  {
+    WorldModel wm(ws, "/posed");
+    const auto box = expected_bounds(T_world_sensor);
+    const auto env = wm.objects()[0].mesh->bounds();
+    EXPECT_EQ(wm.objects()[0].object_id, merged_id);
+    EXPECT_LT((env.min().cast<double>() - box.min()).norm(), 1e-5);
+    EXPECT_LT((env.max().cast<double>() - box.max()).norm(), 1e-5);
+    EXPECT_TRUE(wm.find(in_merged)->T_world_object.isApprox(T_world_sensor * T_root_b * T_b_block, 1e-9));
+    EXPECT_TRUE(wm.find(block)->T_world_object.isApprox(T_world_sensor * T_root_b * T_b_block, 1e-9));
+    // Collision in the world frame: a ball on the patch's centre in the world.
+    EXPECT_TRUE(wm.collision().check({ball(T_world_sensor * Eigen::Vector3d(0.1, 0.1, 0), 0.01)}).in_collision);
+    EXPECT_FALSE(wm.collision().check({ball(Eigen::Vector3d(0.1, 0.1, 0), 0.01)}).in_collision);
+  }
+  // The root image knows no pose: the MultiMesh's own frame, as before.
+  const auto [block2, mm2] = build("/unposed", false);
+  (void)mm2;
+  WorldModel wm(ws, "/unposed");
+  const auto box = expected_bounds(Transform::Identity());
+  const auto env = wm.objects()[0].mesh->bounds();
+  EXPECT_LT((env.min().cast<double>() - box.min()).norm(), 1e-5);
+  EXPECT_LT((env.max().cast<double>() - box.max()).norm(), 1e-5);
+  EXPECT_TRUE(wm.find(block2)->T_world_object.isApprox(T_root_b * T_b_block, 1e-9));
 }
 
 }  // namespace

@@ -33,6 +33,24 @@ inline TriangleMesh floor_mesh(int n) {
   return m;
 }
 
+/// A closed box of `size` [m] centred at the origin: 12 triangles, counter-clockwise from outside.
+inline TriangleMesh box_mesh(const Eigen::Vector3f& size) {
+  TriangleMesh m;
+  for (int i = 0; i < 8; ++i)
+    m.vertices.emplace_back((i & 1 ? 0.5f : -0.5f) * size.x(), (i & 2 ? 0.5f : -0.5f) * size.y(), (i & 4 ? 0.5f : -0.5f) * size.z());
+  const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  for (const auto& q : quads) {
+    m.faces.emplace_back(q[0], q[1], q[2]);
+    m.faces.emplace_back(q[0], q[2], q[3]);
+  }
+  m.compute_vertex_normals();
+  return m;
+}
+
+/// The UR5 of example-robot-data (data/robots); its package path is data/robots.
+inline std::filesystem::path ur5_urdf() { return data_dir() / "robots/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"; }
+inline std::filesystem::path robot_packages() { return data_dir() / "robots"; }
+
 /// Fills folder "/cell" of `ws`.
 inline WorldFixture make_world_fixture(worldmodel::Workspace& ws) {
   using namespace worldmodel;

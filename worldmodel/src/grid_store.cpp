@@ -310,13 +310,10 @@ MergeReport merge_multimesh(Workspace& ws, ObjectId multimesh, const GridDefinit
       const auto& m = members[i];
       const Transform& T = T_root.at(m.member_id);
       auto added = add_to_grid(ws, report.grid, m.mesh, T);
-      if (progress)
-        progress("distributed " + std::to_string(i + 1) + "/" + std::to_string(members.size()) + " " + added.entry.path + ": " +
-                 std::to_string(added.distribute.points) + " samples in " + std::to_string(added.distribute.seconds) + " s");
+      if (progress) progress(i + 1, members.size() + 1, added.entry.path + " distributed");
       member_list.push_back({{"member", m.member_id}, {"mesh", m.mesh}, {"path", added.entry.path}, {"T_root_member", to_row_major(T)}});
       report.added.push_back(std::move(added));
     }
-    if (progress) progress("extracting the surface");
     // The merged mesh's provenance is the merge as a whole.
     std::vector<ObjectId> inputs = {multimesh, report.grid};
     for (const auto& m : members) inputs.push_back(m.mesh);
@@ -327,6 +324,7 @@ MergeReport merge_multimesh(Workspace& ws, ObjectId multimesh, const GridDefinit
                              {"grid", report.grid},
                              {"members", member_list}};
     report.extract = extract_and_store(ws, report.grid, folder, mm.name + "-merged", params, Provenance{"merge", parameters, inputs});
+    if (progress) progress(members.size() + 1, members.size() + 1, "surface extracted");
   });
   report.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return report;

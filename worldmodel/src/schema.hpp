@@ -71,6 +71,29 @@ CREATE TABLE grid_blocks (
   PRIMARY KEY (grid_id, x, y, z)
 );
 )sql",
+      // 2 -> 3: robot objects (a URDF with its meshes, its pose and joint values). SQLite cannot
+      // change a CHECK constraint in place: the objects table is rebuilt with every row and ID
+      // (and its AUTOINCREMENT counter), with foreign keys off while it runs (see migrate()).
+      R"sql(
+CREATE TABLE objects_v3 (
+  id INTEGER PRIMARY KEY AUTOINCREMENT,
+  kind TEXT NOT NULL CHECK (kind IN ('folder', 'image', 'mesh', 'multimesh', 'model', 'recognized_model', 'grid', 'robot')),
+  subkind TEXT NOT NULL DEFAULT '',
+  folder_id INTEGER REFERENCES objects(id) DEFERRABLE INITIALLY DEFERRED,
+  name TEXT NOT NULL,
+  version INTEGER NOT NULL DEFAULT 1 CHECK (version >= 1),
+  previous_version_id INTEGER REFERENCES objects(id) ON DELETE SET NULL,
+  created_at TEXT NOT NULL,
+  metadata TEXT NOT NULL DEFAULT '{}',
+  UNIQUE (folder_id, name, version)
+);
+INSERT INTO objects_v3 (id, kind, subkind, folder_id, name, version, previous_version_id, created_at, metadata)
+  SELECT id, kind, subkind, folder_id, name, version, previous_version_id, created_at, metadata FROM objects ORDER BY id;
+UPDATE sqlite_sequence SET seq = (SELECT MAX(seq) FROM sqlite_sequence WHERE name IN ('objects', 'objects_v3')) WHERE name = 'objects_v3';
+DROP TABLE objects;
+ALTER TABLE objects_v3 RENAME TO objects;
+CREATE INDEX objects_by_folder ON objects (folder_id, name);
+)sql",
   };
   return all;
 }

@@ -114,15 +114,16 @@ std::string to_string(ObjectKind kind) {
     case ObjectKind::kModel: return "model";
     case ObjectKind::kRecognizedModel: return "recognized_model";
     case ObjectKind::kGrid: return "grid";
+    case ObjectKind::kRobot: return "robot";
   }
   return "?";
 }
 
 ObjectKind object_kind_from_string(const std::string& name) {
   for (auto k : {ObjectKind::kFolder, ObjectKind::kImage, ObjectKind::kMesh, ObjectKind::kMultiMesh, ObjectKind::kModel,
-                 ObjectKind::kRecognizedModel, ObjectKind::kGrid})
+                 ObjectKind::kRecognizedModel, ObjectKind::kGrid, ObjectKind::kRobot})
     if (to_string(k) == name) return k;
-  throw Error("unknown object kind \"" + name + "\" (folder, image, mesh, multimesh, model, recognized_model, grid)");
+  throw Error("unknown object kind \"" + name + "\" (folder, image, mesh, multimesh, model, recognized_model, grid, robot)");
 }
 
 void validate_name(const std::string& name) {
@@ -177,10 +178,27 @@ void Workspace::migrate() {
     throw Error(db_->description() + " has schema version " + std::to_string(version) + ", newer than this build's " +
                 std::to_string(kSchemaVersion) + "; update Artisan");
   if (version == kSchemaVersion) return;
+  // A migration that rebuilds a table (SQLite's way to change a constraint) must not cascade the
+  // old table's deletion into the tables that reference it: foreign keys are off while the
+  // migrations run (this can only change outside a transaction), checked before the commit, and
+  // on again afterwards.
+  db_->execute_script("PRAGMA foreign_keys=OFF");
+  struct ForeignKeysOn {
+    Database& db;
+    ~ForeignKeysOn() {
+      try {
+        db.execute_script("PRAGMA foreign_keys=ON");
+      } catch (...) {
+      }
+    }
+  } foreign_keys_on{*db_};
   write([&] {
     // Another process may have migrated while we waited for the write lock.
     int current = db_->has_table("meta") ? schema_version() : 0;
     for (; current < kSchemaVersion; ++current) db_->execute_script(steps[current]);
+    if (const auto broken = db_->query("PRAGMA foreign_key_check"); !broken.empty())
+      throw Error(db_->description() + ": migrating to schema version " + std::to_string(kSchemaVersion) + " would break " +
+                  std::to_string(broken.size()) + " reference(s); the workspace is left as it was");
     db_->query("INSERT OR REPLACE INTO meta (key, value) VALUES ('schema_version', ?)", {std::to_string(kSchemaVersion)});
     if (db_->query("SELECT id FROM objects WHERE folder_id IS NULL").empty()) {
       db_->query("INSERT INTO objects (kind, name, created_at) VALUES ('folder', '', ?)", {now_utc()});

@@ -14,6 +14,7 @@
 #include "artisan/perception/kdtree.hpp"
 #include "artisan/worldmodel/multimesh.hpp"
 #include "artisan/worldmodel/recognition_store.hpp"
+#include "artisan/worldmodel/robot_store.hpp"
 
 namespace artisan::worldmodel {
 namespace {
@@ -55,6 +56,26 @@ void walk(const Workspace& ws, ObjectId folder, std::vector<ObjectInfo>& out) {
 
 ObjectId first_version(const Workspace& ws, const ObjectInfo& info) {
   return info.previous_version ? ws.versions(info.id).front().id : info.id;
+}
+
+// Where a mesh's sensor was in the world, when the image it was meshed from knows it (image
+// metadata sensor.T_world_sensor, written by the simulator, the sensor server and imports with a
+// pose), else the pose the mesh carries itself (T_world_mesh).
+std::optional<Transform> sensor_pose_of_mesh(const Workspace& ws, const ObjectInfo& mesh) {
+  if (const auto prov = ws.provenance(mesh.id); prov && prov->operation == "mesh" && !prov->inputs.empty()) {
+    const auto image = ws.get(prov->inputs.front());
+    if (image.kind == ObjectKind::kImage && image.metadata.contains("sensor") && image.metadata["sensor"].contains("T_world_sensor"))
+      return transform_from_json(image.metadata["sensor"]["T_world_sensor"], image.path + ": sensor.T_world_sensor");
+  }
+  if (mesh.metadata.contains("T_world_mesh")) return transform_from_json(mesh.metadata["T_world_mesh"], mesh.path + ": T_world_mesh");
+  return std::nullopt;
+}
+
+// "ROBOT/LINK" split at the first '/'.
+std::pair<std::string, std::string> robot_and_link(const std::string& attached_to) {
+  const auto slash = attached_to.find('/');
+  if (slash == std::string::npos) return {attached_to, ""};
+  return {attached_to.substr(0, slash), attached_to.substr(slash + 1)};
 }
 
 using PlacedMesh = std::pair<std::shared_ptr<const TriangleMesh>, Transform>;
@@ -110,6 +131,7 @@ bool SceneObject::same_state(const SceneObject& o) const {
 
 struct WorldModel::Loaded {
   std::vector<SceneObject> objects;
+  std::vector<SceneRobot> robots;
   int64_t newest_row = 0;
 };
 
@@ -150,24 +172,73 @@ WorldModel::Loaded WorldModel::load() {
   for (const auto& o : all) out.newest_row = std::max(out.newest_row, o.id);
 
   // Where each mesh sits in the world, and which meshes make the environment.
+  std::map<ObjectId, Transform> T_world_root;  // of each MultiMesh: its root member's sensor pose, else the identity
+  const auto multimesh_pose = [&](ObjectId multimesh) {
+    if (auto it = T_world_root.find(multimesh); it != T_world_root.end()) return it->second;
+    Transform T = Transform::Identity();
+    for (const auto& m : ws_.members(multimesh))
+      if (!m.parent_member) {
+        if (const auto pose = sensor_pose_of_mesh(ws_, ws_.get(m.mesh))) T = *pose;
+        break;
+      }
+    return T_world_root[multimesh] = T;
+  };
   std::vector<std::pair<ObjectInfo, Transform>> environment;
   std::map<ObjectId, Transform> T_world_mesh;
   for (const auto& o : all)
-    if (o.kind == ObjectKind::kMesh && o.subkind == "merged") environment.emplace_back(o, Transform::Identity());
+    if (o.kind == ObjectKind::kMesh && o.subkind == "merged") {
+      // A merge of a MultiMesh is in its root member's frame.
+      Transform T = Transform::Identity();
+      if (const auto prov = ws_.provenance(o.id); prov && prov->operation == "merge" && prov->parameters.contains("multimesh"))
+        T = multimesh_pose(prov->parameters["multimesh"].get<ObjectId>());
+      environment.emplace_back(o, T);
+      T_world_mesh[o.id] = T;
+    }
+  const bool have_merged = !environment.empty();
   const ObjectInfo* newest_multimesh = nullptr;
   for (const auto& o : all)
     if (o.kind == ObjectKind::kMultiMesh && (!newest_multimesh || o.id > newest_multimesh->id)) newest_multimesh = &o;
   if (newest_multimesh) {
     const auto members = ws_.members(newest_multimesh->id);
     const auto T_root = root_transforms(members);
+    const Transform T_world_mm = multimesh_pose(newest_multimesh->id);
     for (const auto& m : members) {
-      T_world_mesh[m.mesh] = T_root.at(m.member_id);
-      if (environment.empty() || environment.front().first.subkind != "merged") environment.emplace_back(ws_.get(m.mesh), T_root.at(m.member_id));
+      const Transform T = T_world_mm * T_root.at(m.member_id);
+      T_world_mesh[m.mesh] = T;
+      if (!have_merged) environment.emplace_back(ws_.get(m.mesh), T);
     }
   }
   if (environment.empty())
     for (const auto& o : all)
-      if (o.kind == ObjectKind::kMesh) environment.emplace_back(o, Transform::Identity());
+      if (o.kind == ObjectKind::kMesh) {
+        const Transform T = sensor_pose_of_mesh(ws_, o).value_or(Transform::Identity());
+        environment.emplace_back(o, T);
+        T_world_mesh[o.id] = T;
+      }
+
+  // Robots at their current joints.
+  for (const auto& o : all) {
+    if (o.kind != ObjectKind::kRobot) continue;
+    auto it = robot_versions_.find(o.id);
+    if (it == robot_versions_.end()) {
+      const auto stored = load_robot(ws_, o.id);
+      SceneRobot r;
+      r.object_id = first_version(ws_, o);
+      r.version_id = o.id;
+      r.version = o.version;
+      r.name = o.name;
+      r.path = o.path;
+      r.model = stored.model;
+      r.T_world_root = stored.T_world_root;
+      r.joints = stored.joints;
+      r.T_world_links = r.model->link_poses(r.joints, r.T_world_root);
+      it = robot_versions_.emplace(o.id, std::move(r)).first;
+    }
+    out.robots.push_back(it->second);
+  }
+  std::erase_if(robot_versions_, [&](const auto& kv) {
+    return std::none_of(out.robots.begin(), out.robots.end(), [&](const SceneRobot& r) { return r.version_id == kv.first; });
+  });
 
   // Recognized objects.
   std::map<ObjectId, ObjectInfo> models;
@@ -205,6 +276,14 @@ WorldModel::Loaded WorldModel::load() {
     if (md.contains("attached_to")) {
       s.attached_to = md["attached_to"].get<std::string>();
       s.T_link_object = transform_from_json(md.at("T_link_object"), o.path);
+      // Carried by a robot of the scene: where its link is now.
+      const auto [robot_name, link] = robot_and_link(s.attached_to);
+      for (const auto& r : out.robots)
+        if (r.name == robot_name && r.T_world_links.count(link)) {
+          const Transform T_world_object = r.T_world_links.at(link) * s.T_link_object;
+          for (auto& g : s.T_world_grasps) g = T_world_object * s.T_world_object.inverse() * g;
+          s.T_world_object = T_world_object;
+        }
     }
     s.margin_m = options_.object_margin_m;
     auto& mesh = model_meshes_[s.model_id];
@@ -234,6 +313,12 @@ WorldModel::Loaded WorldModel::load() {
       cut->signature += std::to_string(s.version_id) + to_row_major_string(s.T_world_object) + ";";
       cut->objects.emplace_back(s.mesh, s.T_world_object);
     }
+    if (options_.cut_out_robots)
+      for (const auto& r : out.robots)
+        for (const auto& [link, mesh] : r.model->link_meshes()) {
+          cut->signature += "robot" + std::to_string(r.version_id) + "/" + link + ";";
+          cut->objects.emplace_back(mesh, r.T_world_links.at(link));
+        }
     cut->cutout_distance_m = options_.cutout_distance_m;
     bool new_whole = false;
     if (whole_signature != whole_signature_ || !whole_environment_) {
@@ -299,6 +384,22 @@ SceneChanges WorldModel::refresh() {
       collision_->remove(id);
     }
   objects_ = std::move(loaded.objects);
+  // Robots: a new version is a change (pose, joints or description).
+  const auto versions = [](const std::vector<SceneRobot>& rs) {
+    std::vector<ObjectId> v;
+    for (const auto& r : rs) v.push_back(r.version_id);
+    return v;
+  };
+  changes.robots = versions(robots_) != versions(loaded.robots);
+  robots_ = std::move(loaded.robots);
+  // The hulls of carried objects, once per mesh.
+  std::map<const TriangleMesh*, std::pair<std::shared_ptr<const TriangleMesh>, std::vector<Eigen::Vector3f>>> hulls;
+  for (const auto& o : objects_) {
+    if (o.attached_to.empty() || hulls.count(o.mesh.get())) continue;
+    auto it = attached_hulls_.find(o.mesh.get());
+    hulls[o.mesh.get()] = it != attached_hulls_.end() ? it->second : std::make_pair(o.mesh, convex_hull_vertices(o.mesh->vertices));
+  }
+  attached_hulls_ = std::move(hulls);
   // Forget encodings no object uses any more.
   std::set<std::string> used;
   for (const auto& o : objects_) used.insert(o.mesh_hash);
@@ -345,6 +446,79 @@ SceneChanges WorldModel::poll_environment(bool wait) {
   }
   start_environment_job();  // objects moved again meanwhile
   return changes;
+}
+
+const SceneRobot& WorldModel::robot(const std::string& name) const {
+  std::string names;
+  for (const auto& r : robots_) {
+    if (r.name == name || (name.empty() && robots_.size() == 1)) return r;
+    names += (names.empty() ? "" : ", ") + r.name;
+  }
+  if (robots_.empty()) throw Error("the world model of " + folder_ + " has no robot (add one with `artisan robot set`)");
+  if (name.empty()) throw Error("the world model of " + folder_ + " has " + std::to_string(robots_.size()) + " robots (" + names + "): name one");
+  throw Error("the world model of " + folder_ + " has no robot '" + name + "' (its robots: " + names + ")");
+}
+
+std::map<std::string, double> WorldModel::joint_values(const std::string& robot_name, const std::vector<std::string>& names,
+                                                       const std::vector<double>& values) const {
+  const auto& r = robot(robot_name);
+  const auto joint_names = r.model->joint_names();
+  std::string listed;
+  for (const auto& n : joint_names) listed += (listed.empty() ? "" : ", ") + n;
+  std::map<std::string, double> q;
+  if (names.empty() && values.empty()) return q;  // the current joints
+  if (names.empty()) {
+    if (values.size() != joint_names.size())
+      throw Error("robot '" + r.name + "' has " + std::to_string(joint_names.size()) + " joints (" + listed + "), got " +
+                  std::to_string(values.size()) + " joint value(s) and no joint names");
+    for (size_t k = 0; k < values.size(); ++k) q[joint_names[k]] = values[k];
+  } else {
+    if (values.size() != names.size())
+      throw Error("robot '" + r.name + "': " + std::to_string(names.size()) + " joint name(s) but " + std::to_string(values.size()) +
+                  " joint value(s)");
+    for (size_t k = 0; k < names.size(); ++k)
+      if (!q.emplace(names[k], values[k]).second) throw Error("robot '" + r.name + "': joint '" + names[k] + "' is given twice");
+  }
+  r.model->check_joints(q);
+  return q;
+}
+
+std::vector<QueryShape> WorldModel::robot_shapes(const RobotQuery& query) const {
+  const auto& r = robot(query.robot);
+  r.model->check_joints(query.joints);
+  std::map<std::string, double> q = r.joints;
+  for (const auto& [name, value] : query.joints) q[name] = value;
+  const auto T_world_links = r.model->link_poses(q, r.T_world_root);
+  auto shapes = r.model->collision_shapes(q, r.T_world_root);
+  // Objects it carries move with their links.
+  for (const auto& o : objects_) {
+    if (o.attached_to.empty()) continue;
+    const auto [robot_name, link] = robot_and_link(o.attached_to);
+    if (robot_name != r.name || !T_world_links.count(link)) continue;
+    auto it = attached_hulls_.find(o.mesh.get());
+    if (it == attached_hulls_.end()) continue;  // made by refresh() for every attached object
+    QueryShape s;
+    s.name = o.path;
+    s.kind = QueryShape::Kind::convex_hull;
+    s.points = it->second.second;
+    s.T_world_shape = T_world_links.at(link) * o.T_link_object;
+    shapes.push_back(std::move(s));
+  }
+  return shapes;
+}
+
+CollisionResult WorldModel::check_robot(const RobotQuery& query, const std::vector<AllowedPair>& allowed, const CheckOptions& options,
+                                        const std::vector<QueryShape>& extra) const {
+  auto shapes = robot_shapes(query);
+  shapes.insert(shapes.end(), extra.begin(), extra.end());
+  return collision_->check(shapes, allowed, options);
+}
+
+DistanceResult WorldModel::robot_distance(const RobotQuery& query, double max_distance_m, const std::vector<AllowedPair>& allowed,
+                                          const std::vector<QueryShape>& extra) const {
+  auto shapes = robot_shapes(query);
+  shapes.insert(shapes.end(), extra.begin(), extra.end());
+  return collision_->distance(shapes, max_distance_m, allowed);
 }
 
 const SceneObject* WorldModel::find(ObjectId object_id) const {
@@ -402,8 +576,10 @@ ObjectId WorldModel::attach(ObjectId object_id, const std::string& link, const T
 }
 
 ObjectId WorldModel::detach(ObjectId object_id, const std::string& author) {
-  if (object_or_throw(object_id).attached_to.empty()) throw Error(find(object_id)->path + " is not attached");
-  return edit(object_id, "detach", author, {{"attached_to", nullptr}, {"T_link_object", nullptr}});
+  const auto& o = object_or_throw(object_id);
+  if (o.attached_to.empty()) throw Error(o.path + " is not attached");
+  // It stays where it was carried to (where its link is now, when the robot is in the scene).
+  return edit(object_id, "detach", author, {{"attached_to", nullptr}, {"T_link_object", nullptr}, {"T_world_object", to_row_major(o.T_world_object)}});
 }
 
 ObjectId WorldModel::remove_object(ObjectId object_id, const std::string& author) {

@@ -25,6 +25,7 @@ struct EnvironmentReading {
 struct ObjectTruth {
   int instance_id = 0;
   std::string name;
+  std::string model;             ///< the library model it is an instance of (Body::model); "" for none
   BodyRole role = BodyRole::structure;
   Transform T_world_object = Transform::Identity();
   int visible_pixels = 0;        ///< pixels of this instance in the acquisition's instance image

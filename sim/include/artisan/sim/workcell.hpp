@@ -39,6 +39,9 @@ struct CollisionShape {
 /// One rigid thing that is rendered and (unless a robot link) simulated.
 struct Body {
   std::string name;
+  /// The known object (library model) it is an instance of: the workcell's "model", else the
+  /// mesh file's stem ("tee" for models/tee.ply) unless scaled; "" for primitives and robot links.
+  std::string model;
   int instance_id = 0;  ///< >= 1, unique; 0 means "nothing" in instance images
   BodyRole role = BodyRole::structure;
   TriangleMesh mesh;    ///< render mesh in the body frame [m] (scale applied), with normals

@@ -1,6 +1,7 @@
 #pragma once
 // A client of the world-model service: rebuilds the scene from LCM alone (snapshot, diffs and
-// meshes fetched by hash), asks queries and sends commands, each matched to its reply by
+// meshes fetched by hash, robots with their joint values), asks queries (also for a robot at
+// any joint values) and sends commands, each matched to its reply by
 // request ID. What a teleoperation or planning tool links against.
 #include <cstdint>
 #include <functional>
@@ -16,6 +17,7 @@
 #include "artisan/command_t.hpp"
 #include "artisan/query_reply_t.hpp"
 #include "artisan/query_t.hpp"
+#include "artisan/robot_state_t.hpp"
 #include "artisan/scene_object_t.hpp"
 #include "artisan/core/triangle_mesh.hpp"
 
@@ -48,11 +50,17 @@ class SceneClient {
   std::string folder() const;
   std::string service_id() const;
   const std::map<int64_t, RemoteObject>& objects() const;
+  /// The robots at their current joint values, as the service last published them.
+  const std::vector<artisan::robot_state_t>& robots() const;
   /// Meshes fetched so far, by hash (each checked against its hash).
   size_t meshes_fetched() const;
   /// Diffs and snapshots received.
   int64_t updates_received() const;
 
+  /// Puts `robot` (its name, or "" for the scene's only robot) at `joints` into `query`: its
+  /// links (and what they carry) are then checked with the query's shapes. Joints not named keep
+  /// their current values.
+  static void set_robot(artisan::query_t& query, const std::string& robot, const std::map<std::string, double>& joints);
   /// Sends `query` (client_id and request_id filled in) and waits for its reply; throws
   /// artisan::Error on timeout.
   artisan::query_reply_t query(artisan::query_t query, double timeout_s = 5.0);

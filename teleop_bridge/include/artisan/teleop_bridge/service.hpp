@@ -1,8 +1,9 @@
 #pragma once
 // The LCM face of the world model: publishes the scene (snapshot on start, after each change
 // and at a low rate; diffs at once, the environment's re-cut after an edit as a diff of its own
-// when the worker has made it), serves meshes in chunks, answers collision, distance and
-// ray queries and operator commands, re-reads the workspace for changes made by others, and
+// when the worker has made it; the robots with their joint values), serves meshes in chunks,
+// answers collision, distance and ray queries (collision and distance also for a robot at any
+// joint values) and operator commands, re-reads the workspace for changes made by others, and
 // sends a heartbeat. Malformed messages are counted and answered with an error; they never stop
 // the service.
 #include <atomic>

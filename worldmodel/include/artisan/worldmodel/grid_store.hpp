@@ -53,8 +53,9 @@ struct GridMeshEntry {
   std::string added_at;                     ///< ISO 8601, UTC
 };
 
-/// Progress lines for long steps (the command line prints them on stderr); may be empty.
-using ProgressFn = std::function<void(const std::string&)>;
+/// Progress of a long operation: `done` of `total` steps finished, `item` says what the last one
+/// did (naming objects by path). Called on the calling thread; may be empty.
+using ProgressFn = std::function<void(size_t done, size_t total, const std::string& item)>;
 
 /// A new, empty grid object `name` in `folder`. Throws on a bad definition or name.
 ObjectId create_grid(Workspace& workspace, ObjectId folder, const std::string& name, const GridDefinition& definition);

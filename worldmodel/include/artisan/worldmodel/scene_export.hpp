@@ -1,6 +1,10 @@
 #pragma once
 // The world model for other robot software: the environment and each recognized object as a
-// link (URDF), a static model (SDF) or a node (glTF), at its pose, with its mesh.
+// link (URDF), a static model (SDF) or a node (glTF), at its pose, with its mesh; each robot with
+// its links' collision geometry: in URDF its own tree (names prefixed "ROBOT_") fixed to the
+// world at its root pose, in SDF a model of its links (at the zero configuration) and joints fixed
+// to the world, in glTF its links at the current joint values. URDF and SDF carry no joint state:
+// the current joint values are written as a comment.
 #include <filesystem>
 #include <string>
 #include <vector>

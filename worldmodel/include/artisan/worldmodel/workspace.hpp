@@ -21,7 +21,7 @@ namespace artisan::worldmodel {
 using ObjectId = int64_t;
 
 /// Object kinds of the original system (see ARCHITECTURE.md, "Data model").
-enum class ObjectKind { kFolder, kImage, kMesh, kMultiMesh, kModel, kRecognizedModel, kGrid };
+enum class ObjectKind { kFolder, kImage, kMesh, kMultiMesh, kModel, kRecognizedModel, kGrid, kRobot };
 
 std::string to_string(ObjectKind kind);
 /// Throws artisan::Error listing the kinds when `name` is none of them.
@@ -30,7 +30,7 @@ ObjectKind object_kind_from_string(const std::string& name);
 struct ObjectInfo {
   ObjectId id = 0;
   ObjectKind kind = ObjectKind::kFolder;
-  std::string subkind;              ///< image: sensor kind; mesh: "original" or "merged"
+  std::string subkind;              ///< image: sensor kind; mesh: "original" or "merged"; robot: its URDF name
   std::optional<ObjectId> folder;   ///< the containing folder; none for the root
   std::string name;
   std::string path;                 ///< "/cell/east/bun000"; "/" for the root
@@ -94,7 +94,7 @@ void validate_name(const std::string& name);
 
 class Workspace {
  public:
-  static constexpr int kSchemaVersion = 2;  ///< 2: grid blocks
+  static constexpr int kSchemaVersion = 3;  ///< 2: grid blocks; 3: robot objects
 
   /// A new workspace file; throws artisan::Error when the file exists.
   static Workspace create(const std::filesystem::path& path);

@@ -1,8 +1,15 @@
 #pragma once
 // The world model of one workcell folder: the environment (merged meshes, else the members of
 // the newest MultiMesh at their registered poses, else the folder's meshes), with the surface of
-// recognized objects cut out, plus every recognized object with its pose, model, score and
-// grasp frames; and its collision scene. Operator edits (correct or accept a pose, attach,
+// recognized objects (and of the robots at their current joints) cut out, plus every recognized
+// object with its pose, model, score and grasp frames, the robots (robot_store.hpp) with their
+// joint values; and its collision scene, which answers queries for a robot at any joints.
+//
+// The world frame: a MultiMesh is placed by its root member's sensor pose when the image that
+// mesh was made from knows it (simulated and tracked sensors: image metadata
+// sensor.T_world_sensor), else at the identity; a merged mesh sits where its MultiMesh does; a
+// lone mesh at its own sensor pose when known. Recognized objects follow the mesh they were
+// found in. Operator edits (correct or accept a pose, attach,
 // detach, delete, add) are stored in the workspace as new versions with author and time, and
 // refresh() rebuilds only what changed.
 //
@@ -19,6 +26,7 @@
 #include <vector>
 
 #include "artisan/worldmodel/collision_scene.hpp"
+#include "artisan/worldmodel/robot_model.hpp"
 #include "artisan/worldmodel/workspace.hpp"
 
 namespace artisan::worldmodel {
@@ -46,6 +54,25 @@ struct SceneObject {
   bool same_state(const SceneObject& o) const;  ///< same version, pose, status and mesh
 };
 
+/// A robot of the world model at its current joint values (as stored in the workspace).
+struct SceneRobot {
+  ObjectId object_id = 0;   ///< stable: the ID of the robot object's first version
+  ObjectId version_id = 0;  ///< the workspace row of the current version
+  int version = 1;
+  std::string name;         ///< the robot object's name: its links' shapes are "NAME/LINK"
+  std::string path;
+  std::shared_ptr<const RobotModel> model;
+  Transform T_world_root = Transform::Identity();
+  std::map<std::string, double> joints;            ///< every movable joint [rad or m]
+  std::map<std::string, Transform> T_world_links;  ///< every link at `joints`
+};
+
+/// A robot at a joint configuration, for collision and distance queries.
+struct RobotQuery {
+  std::string robot;                     ///< its name; "" for the folder's only robot
+  std::map<std::string, double> joints;  ///< [rad or m]; joints not named keep their current values
+};
+
 struct WorldModelOptions {
   double cutout_distance_m = 0.004;  ///< environment triangles this near a recognized object are its surface
   double object_margin_m = 0.0;      ///< collision margin of recognized objects [m]
@@ -53,12 +80,16 @@ struct WorldModelOptions {
   /// Re-cut the environment on a worker thread when only objects moved (see poll_environment());
   /// otherwise refresh() and every edit re-cut it before returning.
   bool environment_in_background = false;
+  /// Cut the robots' own surface (their links at the current joints) out of the environment like
+  /// a recognized object's: the sensors scanned the arm too.
+  bool cut_out_robots = true;
 };
 
 struct SceneChanges {
   std::vector<ObjectId> changed;  ///< new or changed objects (object_id)
   std::vector<ObjectId> removed;
-  bool empty() const { return changed.empty() && removed.empty(); }
+  bool robots = false;  ///< a robot was added, removed or changed (pose, joints, description)
+  bool empty() const { return changed.empty() && removed.empty() && !robots; }
 };
 
 class WorldModel {
@@ -78,6 +109,28 @@ class WorldModel {
   /// A mesh of the scene by hash, encoded (artisan mesh format); throws for an unknown hash.
   const std::vector<uint8_t>& encoded_mesh(const std::string& hash) const;
   const CollisionScene& collision() const { return *collision_; }
+
+  // --- robots ----------------------------------------------------------------------------------
+  const std::vector<SceneRobot>& robots() const { return robots_; }
+  /// The robot named `name` ("" for the only one). Throws naming the robots there are.
+  const SceneRobot& robot(const std::string& name = "") const;
+  /// Joint values as a client sends them: with `names`, one value per name; without, one value
+  /// per joint of the robot in its order (SceneRobot::model->joint_names()); neither: none (the
+  /// current joints). Throws naming the counts and the joints when they do not match, and for an
+  /// unknown name, a value that is not finite or beyond its limits.
+  std::map<std::string, double> joint_values(const std::string& robot, const std::vector<std::string>& names,
+                                             const std::vector<double>& values) const;
+  /// The robot at the query's joints as query shapes: one convex hull per link ("NAME/LINK"), and
+  /// every object attached to one of its links (attach()) as the convex hull of its mesh at
+  /// T_world_link * T_link_object, named by the object's path. Shapes are checked against the
+  /// scene's bodies, never against each other: the robot's links do not collide with each other.
+  /// Throws for an unknown robot or joint, a value that is not finite or beyond its limits.
+  std::vector<QueryShape> robot_shapes(const RobotQuery& query) const;
+  /// The robot at the query's joints (with `extra` shapes, e.g. a tool) against the scene.
+  CollisionResult check_robot(const RobotQuery& query, const std::vector<AllowedPair>& allowed = {}, const CheckOptions& options = {},
+                              const std::vector<QueryShape>& extra = {}) const;
+  DistanceResult robot_distance(const RobotQuery& query, double max_distance_m, const std::vector<AllowedPair>& allowed = {},
+                                const std::vector<QueryShape>& extra = {}) const;
 
   /// Re-reads the folder; updates the scene and the collision scene where they changed.
   SceneChanges refresh();
@@ -116,6 +169,10 @@ class WorldModel {
   int64_t revision_ = 0;
   SceneChanges last_changes_;
   std::vector<SceneObject> objects_;
+  std::vector<SceneRobot> robots_;
+  std::map<ObjectId, SceneRobot> robot_versions_;  ///< loaded robot versions, by workspace row
+  /// Hull vertices of attached objects' meshes, by mesh.
+  std::map<const TriangleMesh*, std::pair<std::shared_ptr<const TriangleMesh>, std::vector<Eigen::Vector3f>>> attached_hulls_;
   std::unique_ptr<CollisionScene> collision_;
   mutable std::map<ObjectId, std::shared_ptr<const TriangleMesh>> model_meshes_;  ///< by model row
   std::map<std::string, std::vector<uint8_t>> encoded_;                          ///< by hash
