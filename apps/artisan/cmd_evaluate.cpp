@@ -131,8 +131,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions& options, Action& a
               << "% visible)\n";
       out << r.found << " of " << r.expected << " library objects seen at least " << std::setprecision(0) << 100 * o->params.min_visible_fraction
           << "% found at their pose, " << r.false_positives << " false positive(s)";
-      if (r.found > 0)
-        out << "; worst strict pose error " << std::setprecision(2) << r.max_rotation_deg << " deg, " << r.max_translation_m * 1e3 << " mm";
+      if (r.found > 0) out << "; worst surface error " << std::setprecision(2) << r.max_mean_distance_m * 1e3 << " mm";
       out << "\n";
       return 0;
     };

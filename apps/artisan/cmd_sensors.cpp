@@ -27,6 +27,7 @@ struct SensorArgs {
   std::string sensor;
   std::vector<double> pan_deg, tilt_deg;          ///< acquire: the sweep
   std::optional<double> ptu_pan_deg, ptu_tilt_deg;  ///< ptu: the target
+  std::optional<double> fov_deg;                    ///< zoom: the target
   std::vector<std::string> params;
   std::string folder = "/";
   std::string name;
@@ -262,6 +263,29 @@ void add_sensor_commands(CLI::App& app, const GlobalOptions& options, Action& ac
         } else {
           std::cout << a.sensor << "\tpan " << deg(reply.state.pan_rad) << "\ttilt " << deg(reply.state.tilt_rad) << "\t(degrees)\n";
         }
+        return 0;
+      });
+    };
+  });
+
+  auto* zoom = app.add_subcommand("zoom", "Set a sensor's zoom (horizontal field of view), or, without --fov, read it");
+  zoom->add_option("sensor", a.sensor, "Sensor name (one with a zoom; see 'artisan sensors')")->required();
+  server_option(zoom);
+  zoom->add_option("--fov", a.fov_deg, "Horizontal field of view [degrees], within the lens's zoom range");
+  zoom->callback([&options, &action] {
+    action = [&options] {
+      return reporting(options, [&options] {
+        const std::string address = sensors::SensorClient::resolve_address(a.server);
+        sensors::SensorClient client(address);
+        const auto state = a.fov_deg ? client.set_zoom(a.sensor, rad(*a.fov_deg)) : client.zoom(a.sensor);
+        if (options.json)
+          std::cout << json{{"sensor", a.sensor}, {"fov_rad", state.fov_rad}, {"fov_deg", deg(state.fov_rad)},
+                            {"limits", {{"min_fov_rad", state.limits.min_fov_rad}, {"max_fov_rad", state.limits.max_fov_rad}}}}
+                           .dump(2)
+                    << "\n";
+        else
+          std::cout << a.sensor << "\tfov " << deg(state.fov_rad) << "\t(degrees; zoom range " << deg(state.limits.min_fov_rad) << " to "
+                    << deg(state.limits.max_fov_rad) << ")\n";
         return 0;
       });
     };

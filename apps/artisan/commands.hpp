@@ -35,7 +35,7 @@ void add_workspace_commands(CLI::App& app, const GlobalOptions& options, Action&
 void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& action);
 /// Registers the simulated workcell: sim scan, sim render, sim sensors, sim models.
 void add_sim_commands(CLI::App& app, const GlobalOptions& options, Action& action);
-/// Registers the sensor server's client commands: acquire, sensors, ptu.
+/// Registers the sensor server's client commands: acquire, sensors, ptu, zoom.
 void add_sensor_commands(CLI::App& app, const GlobalOptions& options, Action& action);
 
 /// Where an acquisition goes in the workspace, checked before the (slow) acquisition: the

@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 
 #include "artisan/sim/physics.hpp"
+#include "artisan/sim/vivid.hpp"
 
 namespace artisan::sensors {
 
@@ -145,11 +147,40 @@ PanTiltState SimulatedWorkcell::move_pan_tilt(const std::string& name, const Pan
   return target;
 }
 
+ZoomLimits SimulatedWorkcell::zoom_limits(const std::string& name) const {
+  const sim::SensorSpec& s = sensor(name);
+  if (s.kind != "minolta-vivid-700") throw SensorError(ErrorCode::kNotSupported, "sensor '" + name + "' (" + s.kind + ") has no zoom");
+  const sim::VividParams p = sim::vivid_params(s.params);
+  return {p.min_fov_rad, p.max_fov_rad};
+}
+
+double SimulatedWorkcell::fov(const std::string& name) const {
+  zoom_limits(name);  // has a zoom
+  std::lock_guard lock(mutex_);
+  const auto it = fov_rad_.find(name);
+  return it != fov_rad_.end() ? it->second : sim::vivid_params(sensor(name).params).horizontal_fov_rad;
+}
+
+double SimulatedWorkcell::set_fov(const std::string& name, double fov_rad) {
+  const ZoomLimits l = zoom_limits(name);
+  if (!(std::isfinite(fov_rad) && fov_rad >= l.min_fov_rad && fov_rad <= l.max_fov_rad))
+    throw SensorError(ErrorCode::kOutOfLimits, "sensor '" + name + "': field of view " + std::to_string(fov_rad) + " rad is outside its zoom range [" +
+                                                   std::to_string(l.min_fov_rad) + ", " + std::to_string(l.max_fov_rad) + "] rad");
+  std::lock_guard lock(mutex_);
+  fov_rad_[name] = fov_rad;
+  return fov_rad;
+}
+
 sim::Acquisition SimulatedWorkcell::scan(const std::string& name, uint64_t seed, const CancelToken& cancel) {
   const sim::SensorSpec& s = sensor(name);
   sim::ScanRequest req;
   req.sensor = name;
   req.seed = seed;
+  {
+    std::lock_guard lock(mutex_);
+    const auto zoomed = fov_rad_.find(name);
+    if (zoomed != fov_rad_.end()) req.horizontal_fov_rad = zoomed->second;
+  }
   if (!s.pan_tilt_robot.empty()) {
     const PanTiltState at = pan_tilt(name);
     req.pan_rad = at.pan_rad;
@@ -193,7 +224,7 @@ Acquisition to_acquisition(sim::Acquisition acq, const sim::SensorSpec& spec) {
 // --- range sensors ---------------------------------------------------------------------------
 
 SimulatedRangeSensor::SimulatedRangeSensor(std::shared_ptr<SimulatedWorkcell> workcell, const std::string& name)
-    : workcell_(std::move(workcell)) {
+    : workcell_(std::move(workcell)), zoom_(*workcell_, name) {
   const sim::SensorSpec& s = workcell_->sensor(name);
   description_.name = s.name;
   description_.kind = s.kind;
@@ -208,6 +239,7 @@ SimulatedRangeSensor::SimulatedRangeSensor(std::shared_ptr<SimulatedWorkcell> wo
   else
     throw Error("sensor '" + name + "' is a " + s.kind + " sensor, not a simulated range sensor");
   if (!s.pan_tilt_robot.empty()) description_.pan_tilt = workcell_->pan_tilt_limits(name);
+  if (s.kind == "minolta-vivid-700") description_.zoom = workcell_->zoom_limits(name);
   description_.parameters = kSeedParameter;
 }
 

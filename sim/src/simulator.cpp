@@ -61,11 +61,19 @@ Acquisition Simulator::scan(const ScanRequest& req) {
   const Transform T_world_sensor = req.T_world_sensor ? *req.T_world_sensor : cell_.T_world_sensor(s);
   Acquisition acq;
   if (s.kind == "minolta-vivid-700") {
-    const VividParams p = vivid_params(s.params);
+    VividParams p = vivid_params(s.params);
+    if (req.horizontal_fov_rad) {
+      const double fov = *req.horizontal_fov_rad;
+      if (!(fov >= p.min_fov_rad && fov <= p.max_fov_rad))
+        throw Error("sensor '" + s.name + "': field of view " + std::to_string(fov) + " rad is outside its zoom range [" +
+                    std::to_string(p.min_fov_rad) + ", " + std::to_string(p.max_fov_rad) + "] rad");
+      p.horizontal_fov_rad = fov;
+    }
     acq = scan_vivid(*renderer_, cell_, T_world_sensor, p, req.seed);
     acq.range.sensor.timestamp_s = clock_s_;
     clock_s_ += p.scan_time_s;
   } else if (s.kind == "pioneer-trinocular") {
+    if (req.horizontal_fov_rad) throw Error("sensor '" + s.name + "' (" + s.kind + ") has fixed lenses: no zoom");
     const PioneerParams p = pioneer_params(s.params);
     clock_s_ += joints.empty() ? 0.0 : p.settle_time_s;
     acq = scan_pioneer(*renderer_, cell_, T_world_sensor, p, req.seed);

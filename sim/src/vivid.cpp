@@ -14,6 +14,7 @@ VividParams vivid_params(const std::map<std::string, double>& overrides) {
   apply_overrides("minolta-vivid-700", overrides,
                   {{"range_width", &p.range_width}, {"range_height", &p.range_height}, {"color_width", &p.color_width},
                    {"color_height", &p.color_height}, {"horizontal_fov_rad", &p.horizontal_fov_rad},
+                   {"min_fov_rad", &p.min_fov_rad}, {"max_fov_rad", &p.max_fov_rad},
                    {"min_range_m", &p.min_range_m}, {"max_range_m", &p.max_range_m}, {"baseline_m", &p.baseline_m},
                    {"noise_sigma_at_1m_m", &p.noise_sigma_at_1m_m}, {"grazing_start_rad", &p.grazing_start_rad},
                    {"grazing_limit_rad", &p.grazing_limit_rad}, {"random_dropout", &p.random_dropout},
@@ -22,6 +23,9 @@ VividParams vivid_params(const std::map<std::string, double>& overrides) {
     throw Error("minolta-vivid-700: image sizes must be positive");
   if (!(p.min_range_m > 0 && p.max_range_m > p.min_range_m)) throw Error("minolta-vivid-700: need 0 < min_range_m < max_range_m");
   if (!(p.grazing_limit_rad > p.grazing_start_rad)) throw Error("minolta-vivid-700: need grazing_start_rad < grazing_limit_rad");
+  if (!(p.min_fov_rad > 0 && p.min_fov_rad <= p.horizontal_fov_rad && p.horizontal_fov_rad <= p.max_fov_rad && p.max_fov_rad < 3.0))
+    throw Error("minolta-vivid-700: need 0 < min_fov_rad <= horizontal_fov_rad <= max_fov_rad < 3 rad (the zoom range), got " +
+                std::to_string(p.min_fov_rad) + ", " + std::to_string(p.horizontal_fov_rad) + ", " + std::to_string(p.max_fov_rad));
   return p;
 }
 

@@ -234,6 +234,56 @@ TEST(SensorServer, PanBeyondLimitsIsRefused) {
   EXPECT_EQ(client.move_pan_tilt("pioneer", {-1.0, 0.5}).state.tilt_rad, 0.5);
 }
 
+// Method: the simulated Vivid's zoom through the server. The description offers it (the Pioneer's
+// does not); zooming in from the default to the narrowest field of view scales the colour
+// camera's focal length as a pinhole's, fx ~ 1 / tan(fov / 2), and narrows the range image's
+// angular extent alike; a setting outside the range is refused naming the range and leaves the
+// zoom as it was.
+TEST(SensorServer, TheVividZoomsWithinItsRange) {
+  auto cell = std::make_shared<SimulatedWorkcell>(kCell);
+  SensorSet set;
+  add_workcell_sensors(set, builtin_drivers(), cell);
+  SensorServer server(std::move(set), ephemeral());
+  SensorClient client(local(server));
+  std::optional<ZoomLimits> limits;
+  for (const auto& d : client.list()) {
+    if (d.name == "vivid") limits = d.zoom;
+    if (d.name == "pioneer") {
+      EXPECT_FALSE(d.zoom);
+    }
+  }
+  ASSERT_TRUE(limits);
+  EXPECT_LT(limits->min_fov_rad, limits->max_fov_rad);
+  const auto wide = client.acquire("vivid", {});
+  ASSERT_TRUE(wide.range);
+  const double fov0 = client.zoom("vivid").fov_rad;
+  EXPECT_EQ(client.set_zoom("vivid", limits->min_fov_rad).fov_rad, limits->min_fov_rad);
+  const auto narrow = client.acquire("vivid", {});
+  ASSERT_TRUE(narrow.range);
+  ASSERT_FALSE(wide.range->images.empty());
+  ASSERT_TRUE(wide.range->images[0].camera && narrow.range->images[0].camera);
+  const double ratio = narrow.range->images[0].camera->fx / wide.range->images[0].camera->fx;
+  EXPECT_NEAR(ratio, std::tan(0.5 * fov0) / std::tan(0.5 * limits->min_fov_rad), 1e-6);
+  // The range image: no valid pixel outside the narrow field of view (the wide one has some).
+  auto widest = [](const RangeImage& r) {
+    double w = 0;
+    for (size_t i = 0; i < r.valid.size(); ++i)
+      if (r.valid[i]) w = std::max(w, std::abs(double(r.points_sensor[i].x() / r.points_sensor[i].z())));
+    return w;
+  };
+  EXPECT_LE(widest(*narrow.range), std::tan(0.5 * limits->min_fov_rad) * 1.01);
+  EXPECT_GT(widest(*wide.range), std::tan(0.5 * limits->min_fov_rad) * 1.1);
+  try {
+    client.set_zoom("vivid", limits->max_fov_rad + 0.1);
+    ADD_FAILURE() << "no error";
+  } catch (const SensorError& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kOutOfLimits);
+    EXPECT_NE(std::string(e.what()).find("zoom range"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(client.zoom("vivid").fov_rad, limits->min_fov_rad);
+  EXPECT_EQ(code_of([&] { client.zoom("pioneer"); }), ErrorCode::kNotSupported);
+}
+
 // Method: a client asks for a 640 x 480 acquisition (about 9 MB uncompressed, sent in 64 KiB
 // chunks), reads the header and a little data, then vanishes with a TCP reset; another stalls
 // without reading. Meanwhile four clients each take 8 acquisitions of both sizes and compare

@@ -11,7 +11,11 @@
 // (and the simulated clock advanced by the move time) by the simulator before the next
 // acquisition with the Pioneer. Environment readings of a sensor mounted on the unit are taken
 // at the recorded position.
+//
+// Zoom: the Vivid's lens (the model's zoom range, sim/vivid.hpp); a setting is checked and
+// recorded at once and used by the next acquisitions of that sensor.
 #include <condition_variable>
+#include <map>
 #include <deque>
 #include <filesystem>
 #include <functional>
@@ -49,7 +53,13 @@ class SimulatedWorkcell {
   /// Checks the limits (kOutOfLimits) and records the target (see the file comment).
   PanTiltState move_pan_tilt(const std::string& sensor, const PanTiltState& target);
 
-  /// An acquisition with a range sensor at the unit's recorded position. Throws SensorError.
+  /// The zoom range of `sensor`'s lens; throws SensorError(kNotSupported) when it has none.
+  ZoomLimits zoom_limits(const std::string& sensor) const;
+  double fov(const std::string& sensor) const;
+  /// Checks the zoom range (kOutOfLimits) and records the field of view [rad].
+  double set_fov(const std::string& sensor, double fov_rad);
+
+  /// An acquisition with a range sensor at the unit's recorded position and zoom. Throws SensorError.
   sim::Acquisition scan(const std::string& sensor, uint64_t seed, const CancelToken& cancel);
   /// A reading with an environment sensor at its mount (the unit's recorded position).
   sim::EnvironmentReading read_environment(const std::string& sensor, uint64_t seed, const CancelToken& cancel);
@@ -68,6 +78,7 @@ class SimulatedWorkcell {
   std::vector<sim::SensorSpec> specs_;
   std::string workcell_name_;
   sim::Workcell kinematics_;  ///< robots and sensors only, at the recorded joint values (guarded by mutex_)
+  std::map<std::string, double> fov_rad_;  ///< recorded zoom settings by sensor (guarded by mutex_)
   mutable std::mutex mutex_;
   std::condition_variable wake_;
   std::deque<std::shared_ptr<Job>> queue_;
@@ -75,12 +86,14 @@ class SimulatedWorkcell {
   std::thread worker_;
 };
 
-/// A simulated range sensor (Vivid 700 or Pioneer); pan/tilt when the workcell mounts it on a unit.
+/// A simulated range sensor (Vivid 700 or Pioneer); pan/tilt when the workcell mounts it on a
+/// unit; zoom for the Vivid.
 class SimulatedRangeSensor : public Sensor, private PanTiltUnit {
  public:
   SimulatedRangeSensor(std::shared_ptr<SimulatedWorkcell> workcell, const std::string& name);
   SensorDescription describe() const override;
   PanTiltUnit* pan_tilt() override { return description_.pan_tilt ? this : nullptr; }
+  ZoomControl* zoom() override { return description_.zoom ? &zoom_ : nullptr; }
 
  protected:
   Acquisition do_acquire(const AcquireRequest& request, const CancelToken& cancel) override;
@@ -90,8 +103,21 @@ class SimulatedRangeSensor : public Sensor, private PanTiltUnit {
   PanTiltState position() const override;
   PanTiltState move(const PanTiltState& target) override;
 
+  class Zoom final : public ZoomControl {
+   public:
+    Zoom(SimulatedWorkcell& workcell, std::string sensor) : workcell_(workcell), sensor_(std::move(sensor)) {}
+    ZoomLimits limits() const override { return workcell_.zoom_limits(sensor_); }
+    double fov_rad() const override { return workcell_.fov(sensor_); }
+    double set_fov_rad(double fov_rad) override { return workcell_.set_fov(sensor_, fov_rad); }
+
+   private:
+    SimulatedWorkcell& workcell_;
+    std::string sensor_;
+  };
+
   std::shared_ptr<SimulatedWorkcell> workcell_;
   SensorDescription description_;
+  Zoom zoom_;
 };
 
 /// A simulated environmental sensor (gamma dose rate, temperature, humidity).

@@ -19,6 +19,9 @@ struct ScanRequest {
   std::optional<Transform> T_world_sensor;   ///< overrides the sensor's mount
   std::optional<double> pan_rad;             ///< pan/tilt sensors: move there first [rad]
   std::optional<double> tilt_rad;            ///< [rad]
+  /// Sensors with a zoom lens (the Vivid): the horizontal field of view for this scan [rad],
+  /// within the model's zoom range (VividParams::min_fov_rad, max_fov_rad).
+  std::optional<double> horizontal_fov_rad;
   uint64_t seed = 0;                         ///< noise seed
 };
 

@@ -19,6 +19,8 @@ struct VividParams {
   int color_width = 400;              ///< colour image width [pixels] (Vivid 700 spec)
   int color_height = 400;             ///< colour image height [pixels] (Vivid 700 spec)
   double horizontal_fov_rad = 0.5;    ///< field of view [rad] (~29 deg; assumed, mid zoom)
+  double min_fov_rad = 0.2;           ///< zoom lens, narrowest field of view [rad] (~11 deg; assumed)
+  double max_fov_rad = 0.75;          ///< zoom lens, widest field of view [rad] (~43 deg; assumed)
   double min_range_m = 0.6;           ///< nearest measurable point [m] (Vivid 700 spec)
   double max_range_m = 2.5;           ///< farthest measurable point [m] (Vivid 700 spec)
   double baseline_m = 0.15;           ///< laser emitter above the camera, along -y of the sensor [m] (assumed)
