@@ -8,13 +8,16 @@
 // 128 MiB, several times smaller than the grid) and in memory (no budget: the arithmetic without
 // the paging); distribute_cpu_s is the process CPU time, steadier than wall time on a shared
 // machine. Beside it, on the same meshed scans (vertices with their normals, in the world
-// frame) and machine: PCL's Poisson surface reconstruction at depths 8 and 9.
-// Open3D is not measured: Debian's python3-open3d is not installed.
+// frame) and machine: PCL's Poisson surface reconstruction at depths 8 and 9, and Open3D's (Debian's
+// python3-open3d, through bench/open3d_poisson.py; "not measured" when it is not installed).
 #include <fcntl.h>
+#include <sys/wait.h>
 #include <omp.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
+#include <filesystem>
 #include <ctime>
 #include <cstdio>
 #include <fstream>
@@ -28,6 +31,7 @@
 #include <pcl/PolygonMesh.h>
 #include <pcl/conversions.h>
 
+#include "artisan/core/io/mesh_io.hpp"
 #include "artisan/core/io/ply.hpp"
 #include "artisan/perception/integration.hpp"
 #include "perception/test_integration_support.hpp"
@@ -127,6 +131,57 @@ nlohmann::json run_grid(const std::vector<artisan::test::PlacedScan>& scans, con
   return j;
 }
 
+// The meshed scans' vertices with their normals, in the world frame: the Poisson peers' input.
+std::vector<std::pair<Eigen::Vector3f, Eigen::Vector3f>> oriented_points(const std::vector<artisan::test::PlacedScan>& scans) {
+  std::vector<std::pair<Eigen::Vector3f, Eigen::Vector3f>> out;
+  for (const auto& s : scans) {
+    auto mesh = s.mesh_scan;
+    mesh.transform(s.T_world_scan);
+    for (size_t i = 0; i < mesh.vertices.size(); ++i) out.emplace_back(mesh.vertices[i], mesh.normals[i]);
+  }
+  return out;
+}
+
+// Open3D's Poisson at `depth` on the same points, in a Python process (bench/open3d_poisson.py).
+nlohmann::json run_open3d_poisson(const std::vector<artisan::test::PlacedScan>& scans, const artisan::TriangleMesh& reference,
+                                  int depth) {
+  const auto dir = std::filesystem::temp_directory_path() / ("artisan-bench-open3d-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const auto points = oriented_points(scans);
+  {
+    std::ofstream out(dir / "points.ply", std::ios::binary);
+    out << "ply\nformat binary_little_endian 1.0\nelement vertex " << points.size()
+        << "\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n";
+    for (const auto& [p, n] : points) {
+      out.write(reinterpret_cast<const char*>(p.data()), 3 * sizeof(float));
+      out.write(reinterpret_cast<const char*>(n.data()), 3 * sizeof(float));
+    }
+  }
+  const std::string command = "/usr/bin/python3 '" + std::string(ARTISAN_BENCH_DIR) + "/open3d_poisson.py' '" + (dir / "points.ply").string() +
+                              "' " + std::to_string(depth) + " '" + (dir / "mesh.ply").string() + "' > '" + (dir / "out.json").string() + "'";
+  const int status = std::system(command.c_str());
+  nlohmann::json j;
+  j["method"] = "Open3D create_from_point_cloud_poisson depth " + std::to_string(depth) + " on the meshed scans' vertices and normals";
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    j["error"] = WIFEXITED(status) && WEXITSTATUS(status) == 3 ? "not measured: python3-open3d is not installed"
+                                                                : "bench/open3d_poisson.py failed (status " + std::to_string(status) + ")";
+    std::filesystem::remove_all(dir);
+    return j;
+  }
+  const auto run = nlohmann::json::parse(std::ifstream(dir / "out.json"));
+  const auto mesh = artisan::io::read_mesh(dir / "mesh.ply");
+  const auto acc = artisan::test::merge_accuracy(mesh, reference);
+  j["points"] = points.size();
+  j["seconds"] = run["seconds"];
+  j["threads"] = run["threads"];
+  j["open3d_version"] = run["version"];
+  j["faces"] = mesh.faces.size();
+  j["accuracy_within_0_5mm"] = acc.accuracy_0_5mm;
+  j["completeness_within_1mm"] = acc.completeness_1mm;
+  std::filesystem::remove_all(dir);
+  return j;
+}
+
 nlohmann::json run_poisson(const std::vector<artisan::test::PlacedScan>& scans, const artisan::TriangleMesh& reference,
                            int depth) {
   pcl::PointCloud<pcl::PointNormal>::Ptr cloud(new pcl::PointCloud<pcl::PointNormal>);
@@ -176,7 +231,7 @@ nlohmann::json run_poisson(const std::vector<artisan::test::PlacedScan>& scans, 
 
 }  // namespace
 
-// --grid-only: skip PCL's Poisson; --quick / --quick-paged: the 0.5 mm run in memory / paged only
+// --grid-only: skip the Poisson peers; --open3d-only: only Open3D's; --quick / --quick-paged: the 0.5 mm run in memory / paged only
 // (tuning).
 int main(int argc, char** argv) {
   const std::string mode = argc > 1 ? argv[1] : "";
@@ -192,6 +247,11 @@ int main(int argc, char** argv) {
     return 0;
   }
   j["scans"] = kScans;
+  if (mode == "--open3d-only") {
+    for (int depth : {8, 9}) j["open3d_poisson"].push_back(run_open3d_poisson(scans, reference, depth));
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
   j["grid"] = nlohmann::json::array();
   j["grid"].push_back(run_grid(scans, reference, 0.001, size_t{32} << 20));
   j["grid"].push_back(run_grid(scans, reference, 0.0005, size_t{64} << 20));
@@ -205,6 +265,8 @@ int main(int argc, char** argv) {
   j["pcl_poisson"] = nlohmann::json::array();
   j["pcl_poisson"].push_back(run_poisson(scans, reference, 8));
   j["pcl_poisson"].push_back(run_poisson(scans, reference, 9));
-  j["open3d"] = "not measured: python3-open3d is not installed";
+  j["open3d_poisson"] = nlohmann::json::array();
+  j["open3d_poisson"].push_back(run_open3d_poisson(scans, reference, 8));
+  j["open3d_poisson"].push_back(run_open3d_poisson(scans, reference, 9));
   std::printf("%s\n", j.dump(2).c_str());
 }

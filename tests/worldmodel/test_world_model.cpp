@@ -433,6 +433,51 @@ TEST_F(RobotWorldTest, TheRobotsOwnScannedSurfaceIsCutOut) {
 
 // --- the world frame --------------------------------------------------------------------------
 
+// Method: a CAD-like model with few, large triangles (a 0.2 m box: 12 triangles, vertices only at
+// its corners) recognized where a dense scan of it lies (its top face sampled every 2 mm, on a
+// floor of 10 mm cells). Every scanned triangle on the box's top face is cut out of the
+// environment, not only those near its corners, and the floor a little away from the box stays.
+TEST(WorldModelCutOut, ASparseModelsWholeSurfaceIsCutOut) {
+  test::TempDir dir;
+  Workspace ws = Workspace::create(dir / "ws.db");
+  const TriangleMesh box = test::box_mesh(Eigen::Vector3f(0.2f, 0.2f, 0.2f));
+  const Transform T_world_box(Eigen::Translation3d(0, 0, 0.1));  // standing on the floor
+  TriangleMesh environment = test::floor_mesh(100);
+  const size_t floor_faces = environment.faces.size();
+  TriangleMesh top = test::floor_mesh(100);  // 1 m at 10 mm cells, scaled to the 0.2 m top face at 2 mm
+  for (auto& v : top.vertices) v = Eigen::Vector3f(0.2f * v.x(), 0.2f * v.y(), 0.2f);
+  environment.append(top);
+  const auto cell = ws.mkdir("/cell");
+  const auto env = ws.add(cell, make_mesh_object(ObjectKind::kMesh, "merged", "merged", environment, {"merge", {}, {}}));
+  const auto model = ws.add(ws.root(), make_mesh_object(ObjectKind::kModel, "", "box", box, {"import", {}, {}}));
+  NewObject r;
+  r.kind = ObjectKind::kRecognizedModel;
+  r.subkind = "box";
+  r.name = "box-in-merged-1";
+  r.metadata = {{"model", "/box"},
+                {"model_id", model},
+                {"T_scene_model", to_row_major(T_world_box)},
+                {"figures", {{"score", 0.9}, {"overlap", 0.6}, {"rmse_m", 0.0004}, {"ambiguous", false}}}};
+  r.provenance = Provenance{"recognize", {}, {env, model}};
+  ws.add(cell, r);
+  WorldModel wm(ws, "/cell");
+  const auto& cut = *wm.objects()[0].mesh;
+  size_t on_top = 0, floor_far = 0;
+  for (const auto& f : cut.faces) {
+    const Eigen::Vector3f c = (cut.vertices[f[0]] + cut.vertices[f[1]] + cut.vertices[f[2]]) / 3;
+    on_top += c.z() > 0.15f;
+    floor_far += c.z() < 0.01f && (std::abs(c.x()) > 0.13f || std::abs(c.y()) > 0.13f);
+  }
+  EXPECT_EQ(on_top, 0u) << "scanned triangles of the box's top face left in the environment";
+  size_t floor_far_before = 0;
+  for (size_t k = 0; k < floor_faces; ++k) {
+    const auto& f = environment.faces[k];
+    const Eigen::Vector3f c = (environment.vertices[f[0]] + environment.vertices[f[1]] + environment.vertices[f[2]]) / 3;
+    floor_far_before += std::abs(c.x()) > 0.13f || std::abs(c.y()) > 0.13f;
+  }
+  EXPECT_EQ(floor_far, floor_far_before);
+}
+
 // Method: two floor patches meshed from images, the root image with a known sensor pose, the
 // other registered to it by a known T_parent_member, and a block recognized in the second: the
 // environment's bounds, the block's pose and a merge of the MultiMesh (in the root's frame) all

@@ -12,6 +12,7 @@
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/mesh_format.hpp"
 #include "artisan/perception/kdtree.hpp"
+#include "artisan/perception/spin_image.hpp"
 #include "artisan/worldmodel/multimesh.hpp"
 #include "artisan/worldmodel/recognition_store.hpp"
 #include "artisan/worldmodel/robot_store.hpp"
@@ -80,16 +81,20 @@ std::pair<std::string, std::string> robot_and_link(const std::string& attached_t
 
 using PlacedMesh = std::pair<std::shared_ptr<const TriangleMesh>, Transform>;
 
-// Removes the triangles whose three vertices all lie within `distance` of the objects' surfaces
-// (their vertices, with the half edge length of each model added), and unused vertices.
+// Removes the triangles whose three vertices all lie within `distance` of the objects' surfaces,
+// and unused vertices. The surfaces are sampled every `distance` (CAD models' vertices alone are
+// too sparse: a long pipe is a few long triangles), so a point of a surface is within
+// distance / sqrt(2) of a sample and the test reaches distance * (1 + 1 / sqrt(2)).
 TriangleMesh cut_out(const TriangleMesh& environment, const std::vector<PlacedMesh>& objects, double distance) {
   if (objects.empty()) return environment;
   std::vector<Eigen::Vector3f> points;
-  double reach = distance;
+  const double spacing = std::max(distance, 1e-4);
+  const double reach = distance + spacing / std::sqrt(2.0);
   for (const auto& [mesh, T_world_object] : objects) {
     const Eigen::Matrix4f T = T_world_object.matrix().cast<float>();
     for (const auto& v : mesh->vertices) points.push_back((T * v.homogeneous()).head<3>());
-    reach = std::max(reach, distance + 0.5 * mesh->median_edge_length());
+    if (!mesh->faces.empty())
+      for (const auto& v : sample_surface(*mesh, spacing).points) points.push_back((T * v.homogeneous()).head<3>());
   }
   const KdTree3 tree(std::move(points));
   std::vector<char> near(environment.vertices.size());
