@@ -8,6 +8,7 @@
 
 #include "artisan/core/error.hpp"
 #include "artisan/worldmodel/multimesh.hpp"
+#include "utc_time.hpp"
 
 namespace artisan::worldmodel {
 
@@ -16,14 +17,6 @@ namespace {
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
 
-std::string now_utc() {
-  const auto t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
 
 std::string where(const ObjectInfo& o) { return o.path + " (ID " + std::to_string(o.id) + ")"; }
 
@@ -224,7 +217,7 @@ AddToGridReport add_to_grid(Workspace& ws, ObjectId grid, ObjectId mesh, const s
     report.entry.view_mesh = view.view_mesh;
     report.entry.view_source = view.source;
     report.entry.points = report.distribute.points;
-    report.entry.added_at = now_utc();
+    report.entry.added_at = utc_now();
     meshes.push_back(grid_mesh_entry_to_json(report.entry));
     std::tie(report.blocks, report.block_bytes) = ws.grid_block_totals(grid);
     json metadata = info.metadata;

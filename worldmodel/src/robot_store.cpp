@@ -8,6 +8,7 @@
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/mesh_format.hpp"
 #include "artisan/core/io/mesh_io.hpp"
+#include "utc_time.hpp"
 
 namespace artisan::worldmodel {
 namespace {
@@ -20,14 +21,6 @@ constexpr const char* kUrdfEncoding = "urdf-xml";
 constexpr const char* kMeshRolePrefix = "mesh:";       // + the URI as the URDF writes it
 constexpr const char* kMeshEncoding = "artisan-mesh/1";  // as the workspace's meshes (checked by Workspace::check())
 
-std::string utc_now() {
-  const std::time_t t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
 
 Transform transform_from_json(const json& j, const std::string& what) {
   if (!j.is_array() || j.size() != 16) throw Error(what + ": expected 16 numbers (a row-major 4x4)");

@@ -16,6 +16,7 @@
 #include "artisan/worldmodel/multimesh.hpp"
 #include "artisan/worldmodel/recognition_store.hpp"
 #include "artisan/worldmodel/robot_store.hpp"
+#include "utc_time.hpp"
 
 namespace artisan::worldmodel {
 namespace {
@@ -39,14 +40,6 @@ std::string to_row_major_string(const Transform& T) {
   return s;
 }
 
-std::string utc_now() {
-  const std::time_t t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
 
 void walk(const Workspace& ws, ObjectId folder, std::vector<ObjectInfo>& out) {
   for (const auto& c : ws.children(folder)) {
