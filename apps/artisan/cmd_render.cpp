@@ -2,6 +2,8 @@
 // renderer): a mesh in its colours, a MultiMesh with each member in its own colour at its
 // registered pose, a recognized model drawn in red over the mesh it was found in, or a folder's
 // world model (environment grey, each recognized object in its own warm colour).
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <iostream>
 
@@ -103,10 +105,25 @@ void add_render_command(CLI::App& app, const GlobalOptions& options, Action& act
         default: throw Error(target.path + " is a " + to_string(target.kind) + "; render draws meshes, multimeshes, recognized models and folders");
       }
       if (cell.bodies.empty()) throw Error("render: " + target.path + " holds nothing to draw");
-      // Fit the view to everything drawn.
-      Eigen::AlignedBox3d box;
+      // Fit the view to what is drawn: the box of the 0.5th to 99.5th percentile of the vertices
+      // along each axis, so a few stray fragments of a scan (floor seen under a table) do not push
+      // the subject into a corner of the picture.
+      std::array<std::vector<double>, 3> coords;
       for (const auto& b : cell.bodies)
-        for (const auto& v : b.mesh.vertices) box.extend(b.T_world_body * v.cast<double>());
+        for (const auto& v : b.mesh.vertices) {
+          const Eigen::Vector3d p = b.T_world_body * v.cast<double>();
+          for (int k = 0; k < 3; ++k) coords[k].push_back(p[k]);
+        }
+      if (coords[0].empty()) throw Error("render: " + target.path + " has no vertices to draw");
+      Eigen::AlignedBox3d box;
+      for (int k = 0; k < 3; ++k) {
+        auto& c = coords[k];
+        const size_t lo = c.size() / 200, hi = c.size() - 1 - c.size() / 200;
+        std::nth_element(c.begin(), c.begin() + static_cast<long>(lo), c.end());
+        box.min()[k] = c[lo];
+        std::nth_element(c.begin(), c.begin() + static_cast<long>(hi), c.end());
+        box.max()[k] = c[hi];
+      }
       const Eigen::Vector3d centre = box.center();
       const double radius = std::max(1e-3, 0.5 * box.diagonal().norm());
       const Eigen::Vector3d up = a->up == "z" ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitY();
