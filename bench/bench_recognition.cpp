@@ -43,6 +43,7 @@
 #include "artisan/perception/recognition.hpp"
 #include "artisan/perception/spin_image.hpp"
 #include "artisan/sim/acquisition.hpp"
+#include "artisan/sim/look_at.hpp"
 #include "artisan/sim/simulator.hpp"
 #include "artisan/sim/workcell.hpp"
 
@@ -116,14 +117,6 @@ fs::path write_scene(int index, std::mt19937& rng, const fs::path& dir) {
   return path;
 }
 
-Transform look_at(const Eigen::Vector3d& eye, const Eigen::Vector3d& target) {
-  const Eigen::Vector3d z = (target - eye).normalized();
-  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
-  Transform T = Transform::Identity();
-  T.linear() << x, z.cross(x), z;
-  T.translation() = eye;
-  return T;
-}
 
 struct ModelData {
   std::string name;
@@ -302,7 +295,7 @@ int main(int argc, char** argv) {
     const double azimuth = (std::uniform_real_distribution<double>(-35, 35)(rng)) * std::numbers::pi / 180;
     sim::ScanRequest request;
     request.sensor = "vivid";
-    request.T_world_sensor = look_at({0.8 * std::sin(azimuth), -0.8 * std::cos(azimuth), 1.6}, {0, 0, 0.82});
+    request.T_world_sensor = sim::look_at({0.8 * std::sin(azimuth), -0.8 * std::cos(azimuth), 1.6}, {0, 0, 0.82});
     request.seed = uint64_t(s + 1);
     const auto acquisition = simulator.scan(request);
     if (!keep.empty()) sim::write_acquisition(acquisition, dir / ("scene" + std::to_string(s)));

@@ -16,6 +16,8 @@
 
 #include <Eigen/Core>
 
+#include "artisan/core/error.hpp"
+
 namespace artisan::test {
 
 inline std::filesystem::path data_dir() { return ARTISAN_DATA_DIR; }
@@ -112,6 +114,17 @@ inline CommandResult run_command(const std::string& command_line) {
   }
   std::filesystem::remove(err_path);
   return r;
+}
+
+/// The message of the artisan::Error `fn` throws ("" when it throws none).
+template <typename Fn>
+std::string error_of(Fn&& fn) {
+  try {
+    fn();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
 }
 
 }  // namespace artisan::test

@@ -2,11 +2,14 @@
 // ground truth that `artisan sim scan` writes beside each simulated acquisition (or any file of
 // that form: objects with name, model, role and T_world_object). Prints, per recognized object,
 // the true instance it matches and its pose error, then the true objects missed.
+#include <algorithm>
+#include <array>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
 
 #include "artisan/core/error.hpp"
+#include "artisan/core/pose.hpp"
 #include "artisan/worldmodel/evaluation.hpp"
 #include "artisan/worldmodel/world_model.hpp"
 #include "commands.hpp"
@@ -18,15 +21,16 @@ using nlohmann::json;
 
 Transform transform_from_json(const json& a, const std::string& where) {
   if (!a.is_array() || a.size() != 16) throw Error(where + ": expected a row-major 4x4 array of 16 numbers");
-  Transform T = Transform::Identity();
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) {
-      const auto& v = a[size_t(4 * r + c)];
-      if (!v.is_number()) throw Error(where + ": element " + std::to_string(4 * r + c) + " is not a number");
-      T.matrix()(r, c) = v.get<double>();
-    }
-  if (!T.matrix().allFinite()) throw Error(where + ": not finite");
-  return T;
+  std::array<double, 16> m{};
+  for (size_t i = 0; i < 16; ++i) {
+    if (!a[i].is_number()) throw Error(where + ": element " + std::to_string(i) + " is not a number");
+    m[i] = a[i].get<double>();
+  }
+  try {
+    return from_row_major(m);  // checks finite, rigid, last row 0 0 0 1
+  } catch (const Error& e) {
+    throw Error(where + ": " + e.what());
+  }
 }
 
 // The objects of every truth file (role "object"), each once, with its best visible fraction.

@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include "artisan/sim/look_at.hpp"
 #include "artisan/core/error.hpp"
 #include "artisan/core/pose.hpp"
 
@@ -46,20 +47,6 @@ Eigen::Vector3d vec3(const nlohmann::json& j, const std::string& field, const L&
   if (j.is_null()) l.fail(field, "is missing");
   if (!j.is_array() || j.size() != 3) l.fail(field, "must be an array of 3 numbers, got " + j.dump());
   return {number(j[0], field, l), number(j[1], field, l), number(j[2], field, l)};
-}
-
-/// Camera-style look-at: z towards the target, x = z × up (right), y = z × x (down).
-inline Transform look_at(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Vector3d& up) {
-  const Eigen::Vector3d z = (target - eye).normalized();
-  Eigen::Vector3d x = z.cross(up);
-  if (x.norm() < 1e-9) x = z.cross(Eigen::Vector3d::UnitY());
-  x.normalize();
-  Transform T = Transform::Identity();
-  T.linear().col(0) = x;
-  T.linear().col(1) = z.cross(x);
-  T.linear().col(2) = z;
-  T.translation() = eye;
-  return T;
 }
 
 /// "pose": "tx ty tz qx qy qz qw" | 7 or 16 numbers; or "look_at": {"eye", "target", "up"}.

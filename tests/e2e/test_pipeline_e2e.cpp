@@ -24,6 +24,7 @@
 #include "artisan/perception/kdtree.hpp"
 #include "artisan/perception/meshing.hpp"
 #include "artisan/perception/spin_image.hpp"
+#include "artisan/sim/look_at.hpp"
 #include "artisan/worldmodel/multimesh.hpp"
 #include "artisan/worldmodel/workspace.hpp"
 #include "perception/mesh_metrics.hpp"
@@ -53,13 +54,7 @@ Transform from_row_major_json(const json& a) {
 // (camera frame: z forward, x right, y down).
 Transform vivid_pose(double azimuth_deg) {
   const double a = azimuth_deg * std::numbers::pi / 180;
-  const Eigen::Vector3d eye(std::sin(a), -std::cos(a), 1.5), target(0, 0, 0.84);
-  const Eigen::Vector3d z = (target - eye).normalized();
-  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
-  Transform T = Transform::Identity();
-  T.linear() << x, z.cross(x), z;
-  T.translation() = eye;
-  return T;
+  return sim::look_at(Eigen::Vector3d(std::sin(a), -std::cos(a), 1.5), Eigen::Vector3d(0, 0, 0.84));
 }
 
 double angle_deg(const Transform& T) { return rotation_angle(T) * 180 / std::numbers::pi; }

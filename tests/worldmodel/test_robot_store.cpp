@@ -18,17 +18,6 @@ namespace fs = std::filesystem;
 const auto kUrdf = test::data_dir() / "robots/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf";
 const Transform kPipeworkPose = parse_transform("0.62 0.3 0.8 0 0 0.70710678 0.70710678");  // data/workcells/pipework.json
 
-// The message of the artisan::Error `fn` throws ("" when it throws none).
-template <typename Fn>
-std::string error_of(Fn&& fn) {
-  try {
-    fn();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
-
 RobotSetRequest ur5_request(const fs::path& urdf = kUrdf, const std::vector<fs::path>& packages = {test::data_dir() / "robots"}) {
   RobotSetRequest r;
   r.folder = "/cell";
@@ -108,35 +97,35 @@ TEST(RobotStore, BadInputIsRefusedAndStoresNothing) {
   ws.mkdir("/cell");
   auto r = ur5_request();
   r.urdf = dir / "missing.urdf";
-  EXPECT_NE(error_of([&] { set_robot(ws, r); }).find("missing.urdf"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { set_robot(ws, r); }).find("missing.urdf"), std::string::npos);
   r = ur5_request(kUrdf, {});
-  EXPECT_NE(error_of([&] { set_robot(ws, r); }).find("package://example-robot-data"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { set_robot(ws, r); }).find("package://example-robot-data"), std::string::npos);
   r = ur5_request();
   r.joints = {{"elbow", 1.0}};
-  const auto unknown = error_of([&] { set_robot(ws, r); });
+  const auto unknown = test::error_of([&] { set_robot(ws, r); });
   EXPECT_NE(unknown.find("'elbow'"), std::string::npos) << unknown;
   EXPECT_NE(unknown.find("elbow_joint"), std::string::npos) << unknown;  // lists the joints there are
   r.joints = {{"elbow_joint", NAN}};
-  EXPECT_NE(error_of([&] { set_robot(ws, r); }).find("elbow_joint"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { set_robot(ws, r); }).find("elbow_joint"), std::string::npos);
   r.joints = {{"elbow_joint", 4.0}};
-  EXPECT_NE(error_of([&] { set_robot(ws, r); }).find("limits"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { set_robot(ws, r); }).find("limits"), std::string::npos);
   r = ur5_request();
   r.T_world_root.reset();
-  EXPECT_NE(error_of([&] { set_robot(ws, r); }).find("pose"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { set_robot(ws, r); }).find("pose"), std::string::npos);
   r = ur5_request();
   r.author = "";
-  EXPECT_NE(error_of([&] { set_robot(ws, r); }).find("author"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { set_robot(ws, r); }).find("author"), std::string::npos);
   r = ur5_request();
   r.folder = "/nowhere";
-  EXPECT_FALSE(error_of([&] { set_robot(ws, r); }).empty());
+  EXPECT_FALSE(test::error_of([&] { set_robot(ws, r); }).empty());
   RobotSetRequest no_robot;
   no_robot.folder = "/cell";
   no_robot.joints = {{"elbow_joint", 1.0}};
   no_robot.author = "alice";
-  EXPECT_NE(error_of([&] { set_robot(ws, no_robot); }).find("--urdf"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { set_robot(ws, no_robot); }).find("--urdf"), std::string::npos);
   // A name taken by another kind of object.
   ws.mkdir("/cell/ur5");
-  EXPECT_NE(error_of([&] { set_robot(ws, ur5_request()); }).find("not a robot"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { set_robot(ws, ur5_request()); }).find("not a robot"), std::string::npos);
   EXPECT_TRUE(find_robots(ws, "/").empty());
   EXPECT_TRUE(ws.check().problems.empty());
 }

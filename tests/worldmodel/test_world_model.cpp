@@ -198,17 +198,6 @@ TEST_F(WorldModelTest, BadRequestsAreRefusedAndChangeNothing) {
 
 // --- robots ---------------------------------------------------------------------------------
 
-// The message of the artisan::Error `fn` throws ("" when it throws none).
-template <typename Fn>
-std::string error_of(Fn&& fn) {
-  try {
-    fn();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
-
 // A UR5 standing at the world origin, folded upright (its current joints), in front of a wall
 // whose face is the plane x = kWallX (a 2 cm slab, 6 m x 4 m: larger than the arm's reach, so the
 // distance from a convex hull to it is the smallest x-gap of the hull's vertices); a 10 cm block
@@ -383,23 +372,23 @@ TEST_F(RobotWorldTest, ChangesOfTheRobotAreSeenByRefresh) {
 
 TEST_F(RobotWorldTest, BadRobotQueriesAreRefusedNamingWhatIsWrong) {
   WorldModel wm(ws, "/arm");
-  auto e = error_of([&] { wm.robot_shapes({"", {{"elbow", 1.0}}}); });
+  auto e = test::error_of([&] { wm.robot_shapes({"", {{"elbow", 1.0}}}); });
   EXPECT_NE(e.find("'elbow'"), std::string::npos) << e;
   EXPECT_NE(e.find("elbow_joint"), std::string::npos) << e;
-  e = error_of([&] { wm.check_robot({"", {{"elbow_joint", NAN}}}); });
+  e = test::error_of([&] { wm.check_robot({"", {{"elbow_joint", NAN}}}); });
   EXPECT_NE(e.find("elbow_joint"), std::string::npos) << e;
   EXPECT_NE(e.find("not finite"), std::string::npos) << e;
-  e = error_of([&] { wm.robot_distance({"", {{"elbow_joint", 7.0}}}, 1.0); });
+  e = test::error_of([&] { wm.robot_distance({"", {{"elbow_joint", 7.0}}}, 1.0); });
   EXPECT_NE(e.find("limits"), std::string::npos) << e;
-  e = error_of([&] { wm.check_robot({"ur10", {}}); });
+  e = test::error_of([&] { wm.check_robot({"ur10", {}}); });
   EXPECT_NE(e.find("ur10"), std::string::npos) << e;
   EXPECT_NE(e.find("ur5"), std::string::npos) << e;
-  e = error_of([&] { wm.joint_values("", {}, {0.1, 0.2, 0.3}); });
+  e = test::error_of([&] { wm.joint_values("", {}, {0.1, 0.2, 0.3}); });
   EXPECT_NE(e.find("6 joints"), std::string::npos) << e;
   EXPECT_NE(e.find("got 3"), std::string::npos) << e;
-  e = error_of([&] { wm.joint_values("", {"elbow_joint", "wrist_1_joint"}, {0.1}); });
+  e = test::error_of([&] { wm.joint_values("", {"elbow_joint", "wrist_1_joint"}, {0.1}); });
   EXPECT_NE(e.find("2 joint name(s) but 1"), std::string::npos) << e;
-  e = error_of([&] { wm.joint_values("", {"elbow_joint", "elbow_joint"}, {0.1, 0.2}); });
+  e = test::error_of([&] { wm.joint_values("", {"elbow_joint", "elbow_joint"}, {0.1, 0.2}); });
   EXPECT_NE(e.find("twice"), std::string::npos) << e;
   const auto q = wm.joint_values("", {}, {0.1, 0.2, 0.3, 0.4, 0.5, 0.6});
   EXPECT_EQ(q.at("wrist_3_joint"), 0.6);
