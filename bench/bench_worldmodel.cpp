@@ -227,12 +227,14 @@ int main() {
     // An operator moves an object: time until another client has the diff.
     std::vector<double> change_s, environment_s;
     const auto first = client.objects().rbegin()->first;
-    for (int i = 0; i < 5; ++i) {
+    // 30 changes; after every 10th the client also waits for the environment's re-cut (the
+    // other changes land while a re-cut runs in the background, as they would in use).
+    for (int i = 0; i < 30; ++i) {
       artisan::command_t c;
       c.type = artisan::command_t::CORRECT_POSE;
       c.author = "bench";
       c.object_id = first;
-      const Transform T = Transform(Eigen::Translation3d(0.01 * i, 0, 0)) * poses.back();
+      const Transform T = Transform(Eigen::Translation3d(0.002 * i, 0, 0)) * poses.back();
       const Eigen::Quaterniond qr(T.rotation());
       for (int k = 0; k < 3; ++k) c.pose.position[k] = T.translation()[k];
       c.pose.quaternion_xyzw[0] = qr.x(), c.pose.quaternion_xyzw[1] = qr.y(), c.pose.quaternion_xyzw[2] = qr.z(), c.pose.quaternion_xyzw[3] = qr.w();
@@ -241,6 +243,7 @@ int main() {
       client.wait_for_revision(r.revision, 60);
       change_s.push_back(seconds_since(t));
       // The environment's re-cut follows as a diff of its own (the next revision).
+      if (i % 10 != 9) continue;
       while (client.revision() <= r.revision && seconds_since(t) < 60) client.pump(5);
       environment_s.push_back(seconds_since(t));
     }

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <thread>
+#include <unordered_map>
 
 #include "artisan/core/error.hpp"
 #include "artisan/worldmodel/database.hpp"
@@ -33,15 +34,33 @@ class SqliteDatabase final : public Database {
       throw Error("workspace " + path.string() + " is not an Artisan workspace: " + e.what());
     }
   }
-  ~SqliteDatabase() override { sqlite3_close(db_); }
+  ~SqliteDatabase() override {
+    for (auto& [sql, stmt] : statements_) sqlite3_finalize(stmt);
+    sqlite3_close(db_);
+  }
 
   std::vector<SqlRow> query(const std::string& sql, const std::vector<SqlValue>& params) override {
+    // Statements are prepared once and kept (the workspace asks the same few questions again
+    // and again; preparing costs more than most of them take to answer). A statement runs to
+    // its end before query() returns, so no two uses of one statement overlap.
     sqlite3_stmt* stmt = nullptr;
-    check(sqlite3_prepare_v2(db_, sql.c_str(), static_cast<int>(sql.size()), &stmt, nullptr), sql);
-    struct Finalize {
+    if (auto it = statements_.find(sql); it != statements_.end()) {
+      stmt = it->second;
+    } else {
+      check(sqlite3_prepare_v3(db_, sql.c_str(), static_cast<int>(sql.size()), SQLITE_PREPARE_PERSISTENT, &stmt, nullptr), sql);
+      if (statements_.size() >= kMaxStatements) {
+        for (auto& [old_sql, old] : statements_) sqlite3_finalize(old);
+        statements_.clear();
+      }
+      statements_.emplace(sql, stmt);
+    }
+    struct Reset {
       sqlite3_stmt* s;
-      ~Finalize() { sqlite3_finalize(s); }
-    } finalize{stmt};
+      ~Reset() {
+        sqlite3_reset(s);
+        sqlite3_clear_bindings(s);
+      }
+    } reset{stmt};
     for (size_t i = 0; i < params.size(); ++i) {
       const int k = static_cast<int>(i + 1);
       const auto& p = params[i];
@@ -126,8 +145,10 @@ class SqliteDatabase final : public Database {
     throw Error("workspace " + path_.string() + ": " + what + " (in: " + sql.substr(0, 80) + ")");
   }
 
+  static constexpr size_t kMaxStatements = 256;
   std::filesystem::path path_;
   sqlite3* db_ = nullptr;
+  std::unordered_map<std::string, sqlite3_stmt*> statements_;  ///< prepared, by their SQL
 };
 
 }  // namespace

@@ -235,7 +235,7 @@ ObjectId Workspace::root() const {
   return as_int(rows[0][0]);
 }
 
-ObjectInfo Workspace::row_to_info(const SqlRow& row) const {
+ObjectInfo Workspace::row_to_info(const SqlRow& row, const std::string* folder_path) const {
   ObjectInfo info;
   info.id = as_int(row[0]);
   info.kind = object_kind_from_string(as_text(row[1]));
@@ -247,7 +247,7 @@ ObjectInfo Workspace::row_to_info(const SqlRow& row) const {
   info.created_at = as_text(row[7]);
   info.metadata = json::parse(as_text(row[8]), nullptr, false);
   if (info.metadata.is_discarded()) throw Error("object " + std::to_string(info.id) + " has corrupt metadata");
-  info.path = path_of(info.id);
+  info.path = folder_path && info.folder ? (*folder_path == "/" ? "/" : *folder_path + "/") + info.name : path_of(info.id);
   return info;
 }
 
@@ -324,17 +324,20 @@ std::vector<ObjectInfo> Workspace::children(ObjectId folder) const {
                                    "ORDER BY kind != 'folder', name",
                                {folder});
   std::vector<ObjectInfo> out;
-  for (const auto& r : rows) out.push_back(row_to_info(r));
+  if (rows.empty()) return out;
+  const std::string folder_path = path_of(folder);
+  for (const auto& r : rows) out.push_back(row_to_info(r, &folder_path));
   return out;
 }
 
 std::vector<ObjectInfo> Workspace::versions(ObjectId id) const {
   const auto info = get(id);
   if (!info.folder) return {info};
+  const std::string folder_path = path_of(*info.folder);
   std::vector<ObjectInfo> out;
   for (const auto& r : db_->query(std::string("SELECT ") + kObjectColumns + " FROM objects WHERE folder_id = ? AND name = ? ORDER BY version",
                                   {*info.folder, info.name}))
-    out.push_back(row_to_info(r));
+    out.push_back(row_to_info(r, &folder_path));
   return out;
 }
 

@@ -48,9 +48,6 @@ void walk(const Workspace& ws, ObjectId folder, std::vector<ObjectInfo>& out) {
   }
 }
 
-ObjectId first_version(const Workspace& ws, const ObjectInfo& info) {
-  return info.previous_version ? ws.versions(info.id).front().id : info.id;
-}
 
 // Where a mesh's sensor was in the world, when the image it was meshed from knows it (image
 // metadata sensor.T_world_sensor, written by the simulator, the sensor server and imports with a
@@ -163,6 +160,13 @@ WorldModel::WorldModel(Workspace& workspace, std::string folder, WorldModelOptio
 
 WorldModel::~WorldModel() = default;
 
+ObjectId WorldModel::first_version(const ObjectInfo& info) {
+  if (!info.previous_version) return info.id;
+  auto it = first_versions_.find(info.id);
+  if (it == first_versions_.end()) it = first_versions_.emplace(info.id, ws_.versions(info.id).front().id).first;
+  return it->second;
+}
+
 WorldModel::Loaded WorldModel::load() {
   Loaded out;
   std::vector<ObjectInfo> all;
@@ -221,7 +225,7 @@ WorldModel::Loaded WorldModel::load() {
     if (it == robot_versions_.end()) {
       const auto stored = load_robot(ws_, o.id);
       SceneRobot r;
-      r.object_id = first_version(ws_, o);
+      r.object_id = first_version(o);
       r.version_id = o.id;
       r.version = o.version;
       r.name = o.name;
@@ -246,7 +250,7 @@ WorldModel::Loaded WorldModel::load() {
     const std::string status = md.value("status", std::string("recognized"));
     if (status == "deleted") continue;
     SceneObject s;
-    s.object_id = first_version(ws_, o);
+    s.object_id = first_version(o);
     s.version_id = o.id;
     s.version = o.version;
     s.path = o.path;
@@ -295,7 +299,7 @@ WorldModel::Loaded WorldModel::load() {
     SceneObject env;
     env.kind = SceneObject::Kind::environment;
     env.status = "environment";
-    env.object_id = first_version(ws_, environment.front().first);
+    env.object_id = first_version(environment.front().first);
     env.version_id = environment.front().first.id;
     env.version = environment.front().first.version;
     env.path = environment.front().first.path;

@@ -158,7 +158,8 @@ class Workspace {
   const Database& database() const { return *db_; }
 
  private:
-  ObjectInfo row_to_info(const SqlRow& row) const;
+  /// `folder_path`: the path of the row's folder when the caller knows it (saves the walk up).
+  ObjectInfo row_to_info(const SqlRow& row, const std::string* folder_path = nullptr) const;
   std::string path_of(ObjectId id) const;
   void migrate();
   ObjectId insert_object(ObjectId folder, const NewObject& object, int64_t version, std::optional<ObjectId> previous);

@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <future>
 #include <map>
+#include <unordered_map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -171,6 +172,9 @@ class WorldModel {
   std::vector<SceneObject> objects_;
   std::vector<SceneRobot> robots_;
   std::map<ObjectId, SceneRobot> robot_versions_;  ///< loaded robot versions, by workspace row
+  /// Each row's first version (rows never change, and IDs are never reused).
+  std::unordered_map<ObjectId, ObjectId> first_versions_;
+  ObjectId first_version(const ObjectInfo& info);
   /// Hull vertices of attached objects' meshes, by mesh.
   std::map<const TriangleMesh*, std::pair<std::shared_ptr<const TriangleMesh>, std::vector<Eigen::Vector3f>>> attached_hulls_;
   std::unique_ptr<CollisionScene> collision_;
