@@ -21,7 +21,7 @@
 // Then a 30-model library (the five parts at six scales, 0.8 to 1.3) on the first 5 scenes,
 // with the compressed (PCA) and the uncompressed spin-image search: rate and search time.
 //
-//   bench_recognition [--scenes N] [--no-ppf] [--ppf-sampling F] [--no-library30] [--set PARAM=VALUE ...] [--keep DIR]
+//   bench_recognition [--scenes N] [--no-ppf] [--ppf-sampling F] [--no-library30] [--diagnose] [--set PARAM=VALUE ...] [--keep DIR]
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -151,6 +151,17 @@ cv::Mat to_cv(const PointCloud& c) {
   return m;
 }
 
+// Symmetry-aware surface distance: model points at the found pose T, expressed in the model
+// frame at the true pose, against the model's own surface points (BOP MSSD at 10% of the diameter).
+bool symmetric_match(const ModelData& m, const Transform& truth, const Transform& T) {
+  const Transform e = truth.inverse() * T;
+  for (const auto& p : m.points.points) {
+    const Eigen::Vector3f q = (e * p.cast<double>()).cast<float>();
+    if (std::sqrt(m.tree->nearest(q).second) > 0.1 * m.diameter) return false;
+  }
+  return true;
+}
+
 // Scores detections against the instances; returns false positives.
 int score(std::vector<Instance>& instances, const std::vector<Detection>& detections, const std::map<std::string, ModelData*>& models) {
   int false_positives = 0;
@@ -161,15 +172,7 @@ int score(std::vector<Instance>& instances, const std::vector<Detection>& detect
       if (inst.model != d.model) continue;
       const Transform e = inst.T_sensor_object.inverse() * d.T;
       const bool strict = rotation_angle(e) * 180 / std::numbers::pi < 5.0 && (d.T.translation() - inst.T_sensor_object.translation()).norm() < 0.005;
-      // Symmetry-aware surface distance: model points at the found pose, expressed in the model
-      // frame at the true pose, against the model's own surface points.
-      double worst = 0;
-      for (const auto& p : m.points.points) {
-        const Eigen::Vector3f q = (e * p.cast<double>()).cast<float>();
-        worst = std::max(worst, double(std::sqrt(m.tree->nearest(q).second)));
-        if (worst > 0.1 * m.diameter) break;
-      }
-      const bool symmetric = worst <= 0.1 * m.diameter;
+      const bool symmetric = symmetric_match(m, inst.T_sensor_object, d.T);
       inst.strict |= strict;
       inst.symmetric |= symmetric;
       matched |= symmetric;
@@ -206,7 +209,7 @@ json band_report(const std::vector<Instance>& all) {
 
 int main(int argc, char** argv) {
   int n_scenes = 50;
-  bool with_ppf = true, with_library30 = true;
+  bool with_ppf = true, with_library30 = true, diagnose = false;
   RecognitionParams tuned;
   std::string keep;  // a folder that keeps the scenes (workcell files and scans)
   // The point-pair detector's relative sampling step. Its authors use 0.025, but on these parts
@@ -219,6 +222,7 @@ int main(int argc, char** argv) {
     if (a == "--scenes" && i + 1 < argc) n_scenes = std::atoi(argv[++i]);
     else if (a == "--no-ppf") with_ppf = false;
     else if (a == "--no-library30") with_library30 = false;
+    else if (a == "--diagnose") diagnose = true;
     else if (a == "--keep" && i + 1 < argc) keep = argv[++i];
     else if (a == "--ppf-sampling" && i + 1 < argc) ppf_sampling = std::atof(argv[++i]);
     else if (a == "--set" && i + 1 < argc) {  // NAME=VALUE of RecognitionParams, for experiments
@@ -229,6 +233,7 @@ int main(int argc, char** argv) {
       else if (k == "max_groups") tuned.max_groups = int(v);
       else if (k == "max_candidates_verified") tuned.max_candidates_verified = int(v);
       else if (k == "min_correlation") tuned.min_correlation = v;
+      else if (k == "max_matches_grouped") tuned.max_matches_grouped = size_t(v);
       else if (k == "scene_point_fraction") tuned.scene_point_fraction = v;
       else if (k == "min_visible_explained") tuned.min_visible_explained = v;
       else if (k == "min_model_overlap") tuned.min_model_overlap = v;
@@ -243,7 +248,7 @@ int main(int argc, char** argv) {
       }
     }
     else {
-      std::cerr << "usage: bench_recognition [--scenes N] [--no-ppf] [--ppf-sampling F] [--no-library30] [--set PARAM=VALUE ...] [--keep DIR]\n";
+      std::cerr << "usage: bench_recognition [--scenes N] [--no-ppf] [--ppf-sampling F] [--no-library30] [--diagnose] [--set PARAM=VALUE ...] [--keep DIR]\n";
       return 2;
     }
   }
@@ -287,6 +292,7 @@ int main(int argc, char** argv) {
   int ours_fp = 0, ppf_fp = 0, scored_scenes = 0;
   double ours_s = 0, ppf_s = 0, sim_s = 0;
   json scenes = json::array();
+  std::map<std::string, int> diagnosis;  // missed instances by the stage a pose near them reached
   std::vector<std::pair<TriangleMesh, std::vector<Instance>>> kept;  // for the 30-model run
   for (int s = 0; s < n_scenes; ++s) {
     const auto t_sim = Clock::now();
@@ -319,6 +325,7 @@ int main(int argc, char** argv) {
 
     RecognitionParams params = tuned;
     params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
+    params.keep_candidates = diagnose;
     auto t0 = Clock::now();
     const auto result = recognize(scene, library, params);
     const double t_ours = since(t0);
@@ -329,6 +336,60 @@ int main(int argc, char** argv) {
     const int fp = score(ours_truth, ours, by_name);
     ours_fp += fp;
     for (const auto& i : scored(ours_truth)) ours_all.push_back(i);
+    if (diagnose) {
+      for (const auto& i : result.instances) {
+        bool matched = false;
+        for (const auto& inst : truth) matched |= inst.model == i.model && symmetric_match(*by_name.at(i.model), inst.T_sensor_object, i.T_scene_model);
+        if (matched)
+          std::fprintf(stderr, "  found %s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f\n", i.model.c_str(), i.overlap_fraction,
+                       i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction);
+        else {
+          double nearest = 1e9, angle = 0;
+          std::string what = "none";
+          for (const auto& inst : truth) {
+            const double d = (inst.T_sensor_object.translation() - i.T_scene_model.translation()).norm();
+            if (d < nearest) nearest = d, angle = rotation_angle(inst.T_sensor_object.inverse() * i.T_scene_model) * 180 / std::numbers::pi, what = inst.model;
+          }
+          std::fprintf(stderr, "  nearest instance %s at %.1f mm, %.1f deg;", what.c_str(), nearest * 1e3, angle);
+          std::fprintf(stderr, "  false %s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f group %zu at %.3f %.3f %.3f\n", i.model.c_str(),
+                       i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction, i.correspondences,
+                       i.T_scene_model.translation().x(), i.T_scene_model.translation().y(), i.T_scene_model.translation().z());
+        }
+      }
+      // Each missed instance: the furthest stage a pose near it reached, and its figures.
+      for (const auto& inst : scored(ours_truth)) {
+        if (inst.symmetric) continue;
+        const RecognitionCandidate* best = nullptr;
+        int rank = 0, rank_best = -1;
+        for (const auto& c : result.candidates) {
+          if (library.model_name(c.model_index) != inst.model) continue;
+          ++rank;
+          if (!symmetric_match(*by_name.at(inst.model), inst.T_sensor_object, c.T_scene_model)) continue;
+          if (!best || int(c.stage) > int(best->stage)) best = &c, rank_best = rank;
+        }
+        // Matches on this instance, and those whose model point is where the scene point is on
+        // the model at its true pose (within 2 resolutions, symmetry not considered).
+        int on_instance = 0, right = 0, basis_on = 0;
+        const ModelData& md = *by_name.at(inst.model);
+        const Transform T_model_sensor = inst.T_sensor_object.inverse();
+        for (const auto& mt : result.matches) {
+          const Eigen::Vector3f local = (T_model_sensor * mt.scene_point.cast<double>()).cast<float>();
+          if (std::sqrt(md.tree->nearest(local).second) > 0.006) continue;
+          ++basis_on;
+          if (library.model_name(mt.model_index) != inst.model) continue;
+          ++on_instance;
+          right += (library.model_points(mt.model_index).points[mt.model_point] - local).norm() < 0.006f;
+        }
+        std::fprintf(stderr, "  [matches on it: %d of any model, %d of its model, %d right]", basis_on, on_instance, right);
+        const std::string stage = !best ? "no-pose" : best->stage == RecognitionCandidate::Stage::coarse ? "not-refined" : "refused";
+        ++diagnosis[stage];
+        std::fprintf(stderr, "  missed %s (%.0f%% occluded): %s", inst.model.c_str(), 100 * (1 - inst.visible), stage.c_str());
+        if (best)
+          std::fprintf(stderr, " rank %d overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f group %zu", rank_best, best->overlap_fraction,
+                       best->rmse_m * 1e3, best->free_space_fraction, best->visible_explained, best->occluded_fraction, best->correspondences);
+        std::fprintf(stderr, "\n");
+      }
+    }
 
     json scene_j = {{"scene", s}, {"instances", truth.size()}, {"detections", ours.size()}, {"false_positives", fp}, {"seconds", t_ours}};
     if (with_ppf) {
@@ -389,6 +450,7 @@ int main(int argc, char** argv) {
                              {"relative_sampling_step", ppf_sampling}};
   out["simulation_seconds_per_scene"] = scored_scenes ? sim_s / scored_scenes : 0.0;
   out["per_scene"] = scenes;
+  if (diagnose) out["artisan_spin_images"]["missed_by_stage"] = diagnosis;
 
   // A 30-model library: the five parts at six scales; compressed against full search.
   SpinImageLibrary big(library_params);

@@ -29,8 +29,10 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 // orthographic grid for parallel rays).
 class FreeSpace {
  public:
-  FreeSpace(const PointCloud& scene, const std::vector<SensorView>& views, double resolution_m, double tolerance_m)
-      : tolerance_(tolerance_m) {
+  FreeSpace(const PointCloud& scene, const KdTree3& scene_tree, const std::vector<SensorView>& views, double resolution_m,
+            double tolerance_m, size_t largest_model_points)
+      : scene_(scene), tree_(scene_tree), resolution_(resolution_m), tolerance_(tolerance_m) {
+    find_background_planes(largest_model_points);
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     for (const auto& p : scene.points) centroid += p.cast<double>();
     if (!scene.points.empty()) centroid /= static_cast<double>(scene.points.size());
@@ -65,12 +67,20 @@ class FreeSpace {
 
   struct Check {
     double free_space = 0;  ///< share of the sensor-facing model surface in front of what was seen
-    double explained = 1;   ///< share of the model surface a sensor should have seen that it did see
+    double explained = 1;   ///< share of the model surface a sensor should have seen, and nothing hid, that it did see
+    double occluded = 0;    ///< share of the model surface a sensor should have seen that something in front hid
+    double planarity = 0;   ///< largest eigenvalue of the mean outer product of the explained surface's normals (1: one plane)
   };
   /// The model (its points at T) against what each view saw. A model point faces a view when its
-  /// normal points at the sensor; it is in free space when it lies in front of the nearest seen
-  /// surface there, explained when on it, occluded when behind it. It should have been seen when
-  /// it faces the view and nothing of the model itself lies in front of it.
+  /// normal points at the sensor; it should have been seen when it faces the view and nothing of
+  /// the model itself lies in front of it. Such a point is
+  ///  - explained when a scene point lies within the tolerance (at most 2 resolutions) of it, other than on a background
+  ///    plane (a plane larger than any model's whole surface: a table, a wall; a model "found"
+  ///    flush with one, sunk into it, is explained by nothing of its own);
+  ///  - in free space when it lies in front of the nearest surface the sensor saw there (where
+  ///    the object cannot be);
+  ///  - occluded when something the sensor saw lies in front of it: no evidence either way, so it
+  ///    counts neither for nor against.
   Check check(const PointCloud& model, const Transform& T) const {
     Check c;
     if (maps_.empty()) return c;
@@ -79,7 +89,17 @@ class FreeSpace {
       p[i] = T * model.points[i].cast<double>();
       n[i] = T.linear() * model.normals[i].cast<double>();
     }
-    std::vector<char> counted(p.size(), 0), violates(p.size(), 0), expected(p.size(), 0), seen_there(p.size(), 0);
+    // 0: not known yet; 1: explained by the scene; 2: explained only by a background plane.
+    std::vector<char> near(p.size(), 0);
+    const auto near_scene = [&](size_t i) {
+      if (!near[i]) {
+        const auto [j, d2] = tree_.nearest(p[i].cast<float>());
+        const double within = std::min(tolerance_, 2 * resolution_);
+        near[i] = d2 <= static_cast<float>(within * within) && !background_[j] ? 1 : 2;
+      }
+      return near[i] == 1;
+    };
+    std::vector<char> counted(p.size(), 0), violates(p.size(), 0), expected(p.size(), 0), seen_there(p.size(), 0), hidden(p.size(), 0);
     std::unordered_map<int64_t, double> self;  // the model's own nearest depth per bin
     std::vector<std::optional<Key>> keys(p.size());
     for (const auto& m : maps_) {
@@ -100,20 +120,61 @@ class FreeSpace {
         // scans' real ray directions are not recorded): what it should have seen is not predicted.
         if (m.view.rays == SensorView::Rays::kPerspective && keys[i]->depth <= self.at(Map::pack(keys[i]->u, keys[i]->v)) + tolerance_) {
           expected[i] = 1;
-          if (std::abs(keys[i]->depth - seen) <= tolerance_) seen_there[i] = 1;
+          if (near_scene(i)) seen_there[i] = 1;
+          else if (m.seen_at(*keys[i]) < keys[i]->depth - tolerance_) hidden[i] = 1;
         }
       }
     }
-    size_t facing = 0, in_front = 0, should = 0, did = 0;
+    size_t facing = 0, in_front = 0, should = 0, did = 0, occluded = 0;
     for (size_t i = 0; i < p.size(); ++i) {
       facing += counted[i];
       in_front += violates[i];
       should += expected[i];
       did += expected[i] && seen_there[i];
+      occluded += expected[i] && !seen_there[i] && hidden[i];
     }
     if (facing) c.free_space = static_cast<double>(in_front) / static_cast<double>(facing);
-    if (should) c.explained = static_cast<double>(did) / static_cast<double>(should);
+    if (should) c.occluded = static_cast<double>(occluded) / static_cast<double>(should);
+    Eigen::Matrix3d normals = Eigen::Matrix3d::Zero();
+    for (size_t i = 0; i < p.size(); ++i)
+      if (expected[i] && seen_there[i]) normals += n[i] * n[i].transpose();
+    if (did) c.planarity = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(normals / static_cast<double>(did)).eigenvalues().maxCoeff();
+    if (should > occluded) c.explained = static_cast<double>(did) / static_cast<double>(should - occluded);
+    else if (should) c.explained = 0;  // everything it should show is hidden: nothing supports it
     return c;
+  }
+
+ private:
+  // Planes of the scene larger than any model's whole surface (more points than the largest
+  // model has at the same resolution): RANSAC on oriented points, the largest first, up to three.
+  void find_background_planes(size_t largest_model_points) {
+    background_.assign(scene_.points.size(), 0);
+    const size_t n = scene_.points.size();
+    if (n < 3 || scene_.normals.size() != n) return;
+    const float distance = static_cast<float>(resolution_), cos_angle = std::cos(20.0f * std::numbers::pi_v<float> / 180);
+    uint64_t state = 0x9e3779b97f4a7c15ull;
+    const auto next = [&] {
+      state ^= state << 13, state ^= state >> 7, state ^= state << 17;
+      return state;
+    };
+    for (int plane = 0; plane < 3; ++plane) {
+      size_t best_count = 0;
+      Eigen::Vector3f best_n = Eigen::Vector3f::Zero();
+      float best_d = 0;
+      for (int it = 0; it < 150; ++it) {
+        const size_t s = next() % n;
+        if (background_[s]) continue;
+        const Eigen::Vector3f nn = scene_.normals[s];
+        const float d = nn.dot(scene_.points[s]);
+        size_t count = 0;
+        for (size_t i = 0; i < n; ++i)
+          count += !background_[i] && std::abs(nn.dot(scene_.points[i]) - d) <= distance && std::abs(nn.dot(scene_.normals[i])) >= cos_angle;
+        if (count > best_count) best_count = count, best_n = nn, best_d = d;
+      }
+      if (best_count <= largest_model_points) break;
+      for (size_t i = 0; i < n; ++i)
+        if (std::abs(best_n.dot(scene_.points[i]) - best_d) <= distance && std::abs(best_n.dot(scene_.normals[i])) >= cos_angle) background_[i] = 1;
+    }
   }
 
  private:
@@ -141,6 +202,11 @@ class FreeSpace {
           if (auto it = nearest.find(pack(k.u + du, k.v + dv)); it != nearest.end()) seen = std::min(seen, it->second);
       return seen;
     }
+    /// The seen depth in the point's own bin, else the nearest around it.
+    double seen_at(const Key& k) const {
+      if (auto it = nearest.find(pack(k.u, k.v)); it != nearest.end()) return it->second;
+      return nearest_around(k);
+    }
     std::optional<Key> key(const Eigen::Vector3d& p) const {
       const Eigen::Vector3d q = local(p);
       if (view.rays == SensorView::Rays::kPerspective) {
@@ -150,7 +216,10 @@ class FreeSpace {
       return Key{static_cast<int64_t>(std::floor(q.x() / bin)), static_cast<int64_t>(std::floor(q.y() / bin)), q.z()};
     }
   };
-  double tolerance_;
+  const PointCloud& scene_;
+  const KdTree3& tree_;
+  double resolution_, tolerance_;
+  std::vector<char> background_;  ///< per scene point: on a background plane
   std::vector<Map> maps_;
 };
 
@@ -333,14 +402,18 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   for (size_t i = 0; i < best.size(); ++i)
     for (const auto& h : best[i]) {
       const float r = 1.0f - 0.5f * h.d2;
-      if (r >= params.min_correlation) per_model[h.model].push_back({h.point, basis[i], r});
+      if (r < params.min_correlation) continue;
+      per_model[h.model].push_back({h.point, basis[i], r});
+      if (params.keep_candidates) result.matches.push_back({h.model, h.point, scene_points.points[basis[i]], r});
     }
   result.seconds_search = since(t0);
 
   // Per model: group, estimate, verify by ICP; accept instances one at a time, removing the
   // scene points each explains.
   t0 = Clock::now();
-  const FreeSpace free_space(scene_points, params.views, res, params.free_space_tolerance_factor * res);
+  size_t largest_model = 0;
+  for (size_t m = 0; m < library.model_count(); ++m) largest_model = std::max(largest_model, library.model_points(m).points.size());
+  const FreeSpace free_space(scene_points, scene_tree, params.views, res, params.free_space_tolerance_factor * res, largest_model);
   const IcpSettings coarse = detail::verification_icp(res, 15);
   IcpSettings fine = coarse;
   fine.max_iterations = 40;
@@ -351,13 +424,16 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   grouping.geometric_consistency = params.geometric_consistency;
   grouping.gamma_m = params.gamma_factor * res;
   grouping.max_groups = params.max_groups;
+  grouping.max_candidates = params.max_matches_grouped;
+  // Scene points an accepted instance explains support no other instance, of any model.
+  std::vector<char> explained(scene_points.points.size(), 0);
   for (size_t m = 0; m < library.model_count(); ++m) {
     const PointCloud& model = library.model_points(m);
     auto candidates = per_model[m];
+    std::erase_if(candidates, [&](const detail::Correspondence& c) { return explained[c.target]; });
     if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
       std::fprintf(stderr, "model %s: %zu model points, %zu correspondences from %zu scene points\n", library.model_name(m).c_str(),
                    model.points.size(), candidates.size(), basis.size());
-    std::vector<char> explained(scene_points.points.size(), 0);
     for (int instance = 0; instance < params.max_instances && candidates.size() >= 3; ++instance) {
       const auto grouped = detail::group_correspondences(model, scene_points, candidates, grouping);
       struct Verified {
@@ -376,21 +452,47 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       // In score order, the first pose that passes the fine ICP and the free-space test wins.
       Verified* winner = nullptr;
       FreeSpace::Check winner_seen;
+      size_t refined_count = 0;
       for (int tried = 0; tried < std::min<int>(params.max_candidates_verified, static_cast<int>(verified.size())); ++tried) {
         auto& v = verified[static_cast<size_t>(tried)];
+        refined_count = static_cast<size_t>(tried) + 1;
         v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
         v.T = v.icp.T_target_source;
         const auto seen = free_space.check(model, v.T);
         if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
-          std::fprintf(stderr, "  %s try %d: overlap %.3f rmse %.2f mm free space %.3f explained %.3f group %zu\n", library.model_name(m).c_str(),
-                       tried, v.icp.overlap_fraction, v.icp.rmse_m * 1e3, seen.free_space, seen.explained, v.size);
-        if (v.icp.overlap_fraction < params.min_model_overlap || v.icp.rmse_m > params.max_rmse_factor * res ||
-            seen.free_space > params.max_free_space_fraction || seen.explained < params.min_visible_explained)
+          std::fprintf(stderr, "  %s try %d: overlap %.3f rmse %.2f mm free space %.3f explained %.3f occluded %.3f planarity %.3f group %zu\n",
+                       library.model_name(m).c_str(), tried, v.icp.overlap_fraction, v.icp.rmse_m * 1e3, seen.free_space, seen.explained,
+                       seen.occluded, seen.planarity, v.size);
+        // What something hid is not held against the overlap either; but what is seen must be
+        // more than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
+        if (v.icp.overlap_fraction < params.min_model_overlap * (1 - seen.occluded) || v.icp.rmse_m > params.max_rmse_factor * res ||
+            seen.free_space > params.max_free_space_fraction || seen.explained < params.min_visible_explained ||
+            seen.planarity > params.max_support_planarity)
           continue;
         winner = &v;
         winner_seen = seen;
         break;
       }
+      if (params.keep_candidates)
+        for (size_t k = 0; k < verified.size(); ++k) {
+          const auto& v = verified[k];
+          RecognitionCandidate c;
+          c.model_index = m;
+          c.T_scene_model = v.T;
+          c.overlap_fraction = v.icp.overlap_fraction;
+          c.rmse_m = v.icp.rmse_m;
+          c.correspondences = v.size;
+          const bool refined = k < refined_count;
+          if (refined) {
+            const auto seen = free_space.check(model, v.T);
+            c.free_space_fraction = seen.free_space;
+            c.visible_explained = seen.explained;
+            c.occluded_fraction = seen.occluded;
+          }
+          c.stage = &v == winner ? RecognitionCandidate::Stage::accepted
+                                 : refined ? RecognitionCandidate::Stage::refused : RecognitionCandidate::Stage::coarse;
+          result.candidates.push_back(c);
+        }
       if (!winner) break;
       if (winner != &verified.front()) std::swap(*winner, verified.front());
       auto& top = verified.front();
@@ -404,6 +506,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       found.correspondences = top.size;
       found.free_space_fraction = winner_seen.free_space;
       found.visible_explained = winner_seen.explained;
+      found.occluded_fraction = winner_seen.occluded;
       for (size_t k = 1; k < verified.size(); ++k) {
         const auto& other = verified[k];
         if (other.score < top.score - params.ambiguity_margin) break;

@@ -84,10 +84,11 @@ struct RecognitionParams {
   int neighbours = 3;                  ///< [1] library matches kept per scene point (nearest in the search space)
   bool compressed_search = true;       ///< search the PCA space (false: the full spin images)
   double min_correlation = 0.6;        ///< [1] matches below this estimated correlation are dropped
+  size_t max_matches_grouped = 1500;   ///< strongest matches per model that the grouping considers
   double geometric_consistency = 0.25; ///< [1] T_gc
   double gamma_factor = 4.0;           ///< [1] grouping gamma, in resolutions
   int max_groups = 30;                 ///< [1] per model and instance search
-  double min_model_overlap = 0.15;     ///< [1] share of the model's points that must lie on the scene
+  double min_model_overlap = 0.15;     ///< [1] share of the model's points that must lie on the scene (less the share occluded)
   double max_rmse_factor = 0.5;        ///< [1] largest accepted residual, in resolutions
   int max_instances = 5;               ///< [1] per model
   double ambiguity_margin = 0.05;      ///< [1] a different pose within this overlap of the best is an ambiguity
@@ -99,9 +100,13 @@ struct RecognitionParams {
   double max_free_space_fraction = 0.1;  ///< [1]
   /// With perspective views: the share of the model surface a sensor should have seen (facing
   /// it, not hidden by the model itself) that lies on the scene surface must reach this.
-  double min_visible_explained = 0.65;
+  double min_visible_explained = 0.85;
+  /// With perspective views: the explained surface's normals may not all be one plane's (the
+  /// largest eigenvalue of their mean outer product, 1 for a plane, must stay below this).
+  double max_support_planarity = 0.95;
   double free_space_tolerance_factor = 3.0;  ///< [resolutions] how far in front of the seen surface counts
   int max_candidates_verified = 5;     ///< [1] poses tried in score order per instance before giving up
+  bool keep_candidates = false;        ///< fill RecognitionResult::candidates (diagnosis)
 };
 
 struct RecognizedInstance {
@@ -113,13 +118,30 @@ struct RecognizedInstance {
   double score = 0.0;             ///< [1] overlap - residual penalty; higher is better
   size_t correspondences = 0;     ///< in the winning group
   double free_space_fraction = 0.0;  ///< [1] share of the model's sensor-facing surface in seen free space
-  double visible_explained = 1.0;    ///< [1] share of the model surface the sensors should have seen that they saw
+  double visible_explained = 1.0;    ///< [1] share of the model surface the sensors should have seen, and nothing hid, that they saw
+  double occluded_fraction = 0.0;    ///< [1] share of the model surface the sensors should have seen that something hid
   bool ambiguous = false;         ///< another pose explains the scene almost as well (symmetry)
   Transform T_scene_model_alternative = Transform::Identity();  ///< that pose, when ambiguous
 };
 
+/// A pose that was tried, with its figures and how far it got (diagnosis).
+struct RecognitionCandidate {
+  size_t model_index = 0;
+  Transform T_scene_model = Transform::Identity();
+  double overlap_fraction = 0, rmse_m = 0, free_space_fraction = 0, visible_explained = 1, occluded_fraction = 0;
+  size_t correspondences = 0;
+  enum class Stage { coarse, refused, accepted } stage = Stage::coarse;  ///< coarse: never refined
+};
+
 struct RecognitionResult {
   std::vector<RecognizedInstance> instances;
+  std::vector<RecognitionCandidate> candidates;  ///< with RecognitionParams::keep_candidates
+  struct Match {
+    size_t model_index, model_point;  ///< into SpinImageLibrary::model_points
+    Eigen::Vector3f scene_point;
+    float correlation;
+  };
+  std::vector<Match> matches;  ///< the correspondences kept, with RecognitionParams::keep_candidates
   size_t scene_points = 0;
   double seconds_spin_images = 0.0, seconds_search = 0.0, seconds_verify = 0.0;
 };
