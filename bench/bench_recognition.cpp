@@ -242,6 +242,8 @@ int main(int argc, char** argv) {
       else if (k == "image_width") library_params.spin.image_width = int(v);
       else if (k == "support_angle_deg") library_params.spin.support_angle_deg = v;
       else if (k == "resolution_m") library_params.resolution_m = v;
+      else if (k == "pca_variance") library_params.pca_variance = v;
+      else if (k == "compressed_search") tuned.compressed_search = v != 0;
       else {
         std::cerr << "bench_recognition: unknown parameter " << k << "\n";
         return 2;

@@ -425,12 +425,11 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   grouping.gamma_m = params.gamma_factor * res;
   grouping.max_groups = params.max_groups;
   grouping.max_candidates = params.max_matches_grouped;
-  // Scene points an accepted instance explains support no other instance, of any model.
-  std::vector<char> explained(scene_points.points.size(), 0);
+  std::vector<std::vector<size_t>> support;  // per instance: the scene points it explains
   for (size_t m = 0; m < library.model_count(); ++m) {
     const PointCloud& model = library.model_points(m);
     auto candidates = per_model[m];
-    std::erase_if(candidates, [&](const detail::Correspondence& c) { return explained[c.target]; });
+    std::vector<char> explained(scene_points.points.size(), 0);
     if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
       std::fprintf(stderr, "model %s: %zu model points, %zu correspondences from %zu scene points\n", library.model_name(m).c_str(),
                    model.points.size(), candidates.size(), basis.size());
@@ -518,15 +517,39 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         }
       }
       result.instances.push_back(found);
-      // The scene points this instance explains no longer support other instances.
+      // The scene points this instance explains no longer support other instances of the model.
       const Eigen::Isometry3f T = top.T.cast<float>();
       std::vector<size_t> near;
+      auto& mine = support.emplace_back();
       for (const auto& p : model.points) {
         scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
-        for (size_t s : near) explained[s] = 1;
+        for (size_t s : near)
+          if (!explained[s]) explained[s] = 1, mine.push_back(s);
       }
       std::erase_if(candidates, [&](const detail::Correspondence& c) { return explained[c.target]; });
     }
+  }
+  // Instances of different models that explain the same surface compete: the one explaining
+  // more of the scene wins, and an instance whose surface is mostly another's already is
+  // dropped (a flange's face "found" on a tee's end, a part at a slightly different scale).
+  {
+    std::vector<size_t> order(result.instances.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return support[a].size() > support[b].size(); });
+    std::vector<char> claimed(scene_points.points.size(), 0), keep(order.size(), 0);
+    for (const size_t i : order) {
+      size_t shared = 0;
+      for (const size_t s : support[i]) shared += claimed[s];
+      if (static_cast<double>(shared) > params.max_shared_support * static_cast<double>(support[i].size())) continue;
+      keep[i] = 1;
+      for (const size_t s : support[i]) claimed[s] = 1;
+    }
+    std::vector<RecognizedInstance> kept;
+    for (size_t i = 0; i < keep.size(); ++i)
+      if (keep[i]) kept.push_back(std::move(result.instances[i]));
+      else if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
+        std::fprintf(stderr, "  %s dropped: its surface is mostly another instance's\n", result.instances[i].model.c_str());
+    result.instances = std::move(kept);
   }
   result.seconds_verify = since(t0);
   if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))

@@ -91,6 +91,9 @@ struct RecognitionParams {
   double min_model_overlap = 0.15;     ///< [1] share of the model's points that must lie on the scene (less the share occluded)
   double max_rmse_factor = 0.5;        ///< [1] largest accepted residual, in resolutions
   int max_instances = 5;               ///< [1] per model
+  /// [1] an instance sharing more than this share of the scene surface it explains with an
+  /// instance (of another model) that explains more is dropped
+  double max_shared_support = 0.3;
   double ambiguity_margin = 0.05;      ///< [1] a different pose within this overlap of the best is an ambiguity
   /// Where the sensors that saw the scene were, in the scene frame (one view for a single scan,
   /// one per merged scan). With views, a pose is refused when more than
