@@ -74,9 +74,10 @@ class FreeSpace {
   /// The model (its points at T) against what each view saw. A model point faces a view when its
   /// normal points at the sensor; it should have been seen when it faces the view and nothing of
   /// the model itself lies in front of it. Such a point is
-  ///  - explained when a scene point lies within the tolerance (at most 2 resolutions) of it, other than on a background
-  ///    plane (a plane larger than any model's whole surface: a table, a wall; a model "found"
-  ///    flush with one, sunk into it, is explained by nothing of its own);
+  ///  - explained when a scene point lies within the tolerance (at most 2 resolutions) of it,
+  ///    other than on a background plane (a plane larger than any model's whole surface: a
+  ///    table, a wall; a model "found" flush with one, sunk into it, is explained by nothing of
+  ///    its own);
   ///  - in free space when it lies in front of the nearest surface the sensor saw there (where
   ///    the object cannot be);
   ///  - occluded when something the sensor saw lies in front of it: no evidence either way, so it
@@ -89,7 +90,7 @@ class FreeSpace {
       p[i] = T * model.points[i].cast<double>();
       n[i] = T.linear() * model.normals[i].cast<double>();
     }
-    // 0: not known yet; 1: explained by the scene; 2: explained only by a background plane.
+    // 0: not known yet; 1: explained by the scene; 2: not (nothing near, or only a background plane).
     std::vector<char> near(p.size(), 0);
     const auto near_scene = [&](size_t i) {
       if (!near[i]) {
