@@ -10,6 +10,7 @@
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/atomic_file.hpp"
 #include "artisan/sim/acquisition.hpp"
+#include "artisan/sim/look_at.hpp"
 #include "artisan/sim/renderer.hpp"
 #include "artisan/worldmodel/multimesh.hpp"
 #include "artisan/worldmodel/world_model.hpp"
@@ -134,15 +135,8 @@ void add_render_command(CLI::App& app, const GlobalOptions& options, Action& act
       const double fov = 0.7;
       const double distance = radius / std::sin(fov / 2) * 1.05;
       const Eigen::Vector3d eye = centre + dir * distance;
-      const Eigen::Vector3d forward = (centre - eye).normalized();
-      Eigen::Vector3d right = forward.cross(up);
-      if (right.norm() < 1e-6) right = forward.cross(side);
-      right.normalize();
-      Transform T_world_camera = Transform::Identity();
-      T_world_camera.linear().col(0) = right;
-      T_world_camera.linear().col(1) = forward.cross(right);
-      T_world_camera.linear().col(2) = forward;
-      T_world_camera.translation() = eye;
+      const Transform T_world_camera = sim::look_at(eye, centre, up, side);
+      const Eigen::Vector3d right = T_world_camera.linear().col(0);
       sim::Light light;
       light.position_world = eye + up * distance * 0.5 + right * distance * 0.3;
       cell.lights.push_back(light);

@@ -441,24 +441,22 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         IcpResult icp;
         double score;
         size_t size;
+        std::optional<FreeSpace::Check> seen;  ///< once refined
       };
       std::vector<Verified> verified;
       for (const auto& g : grouped.groups) {
         const auto r = icp_point_to_plane(model, scene_points, scene_tree, g.T_target_source, coarse);
-        verified.push_back({r.T_target_source, r, r.overlap_fraction - 0.5 * r.rmse_m / res, g.size});
+        verified.push_back({r.T_target_source, r, r.overlap_fraction - 0.5 * r.rmse_m / res, g.size, std::nullopt});
       }
       if (verified.empty()) break;
       std::sort(verified.begin(), verified.end(), [](const Verified& a, const Verified& b) { return a.score > b.score; });
       // In score order, the first pose that passes the fine ICP and the free-space test wins.
       Verified* winner = nullptr;
-      FreeSpace::Check winner_seen;
-      size_t refined_count = 0;
       for (int tried = 0; tried < std::min<int>(params.max_candidates_verified, static_cast<int>(verified.size())); ++tried) {
         auto& v = verified[static_cast<size_t>(tried)];
-        refined_count = static_cast<size_t>(tried) + 1;
         v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
         v.T = v.icp.T_target_source;
-        const auto seen = free_space.check(model, v.T);
+        const auto& seen = v.seen.emplace(free_space.check(model, v.T));
         if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
           std::fprintf(stderr, "  %s try %d: overlap %.3f rmse %.2f mm free space %.3f explained %.3f occluded %.3f planarity %.3f group %zu\n",
                        library.model_name(m).c_str(), tried, v.icp.overlap_fraction, v.icp.rmse_m * 1e3, seen.free_space, seen.explained,
@@ -470,7 +468,6 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
             seen.planarity > params.max_support_planarity)
           continue;
         winner = &v;
-        winner_seen = seen;
         break;
       }
       if (params.keep_candidates)
@@ -482,15 +479,13 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
           c.overlap_fraction = v.icp.overlap_fraction;
           c.rmse_m = v.icp.rmse_m;
           c.correspondences = v.size;
-          const bool refined = k < refined_count;
-          if (refined) {
-            const auto seen = free_space.check(model, v.T);
-            c.free_space_fraction = seen.free_space;
-            c.visible_explained = seen.explained;
-            c.occluded_fraction = seen.occluded;
+          if (v.seen) {
+            c.free_space_fraction = v.seen->free_space;
+            c.visible_explained = v.seen->explained;
+            c.occluded_fraction = v.seen->occluded;
           }
           c.stage = &v == winner ? RecognitionCandidate::Stage::accepted
-                                 : refined ? RecognitionCandidate::Stage::refused : RecognitionCandidate::Stage::coarse;
+                                 : v.seen ? RecognitionCandidate::Stage::refused : RecognitionCandidate::Stage::coarse;
           result.candidates.push_back(c);
         }
       if (!winner) break;
@@ -504,9 +499,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       found.rmse_m = top.icp.rmse_m;
       found.score = top.score;
       found.correspondences = top.size;
-      found.free_space_fraction = winner_seen.free_space;
-      found.visible_explained = winner_seen.explained;
-      found.occluded_fraction = winner_seen.occluded;
+      found.free_space_fraction = top.seen->free_space;
+      found.visible_explained = top.seen->explained;
+      found.occluded_fraction = top.seen->occluded;
       for (size_t k = 1; k < verified.size(); ++k) {
         const auto& other = verified[k];
         if (other.score < top.score - params.ambiguity_margin) break;

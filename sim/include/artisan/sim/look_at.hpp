@@ -5,11 +5,12 @@
 namespace artisan::sim {
 
 /// T_world_camera at `eye` looking at `target`: z towards the target, x = z × up (right),
-/// y = z × x (down). When the view is along `up`, x = z × unit y instead.
-inline Transform look_at(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Vector3d& up = Eigen::Vector3d::UnitZ()) {
+/// y = z × x (down). When the view is along `up`, x = z × `side` instead.
+inline Transform look_at(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Vector3d& up = Eigen::Vector3d::UnitZ(),
+                         const Eigen::Vector3d& side = Eigen::Vector3d::UnitY()) {
   const Eigen::Vector3d z = (target - eye).normalized();
   Eigen::Vector3d x = z.cross(up);
-  if (x.norm() < 1e-9) x = z.cross(Eigen::Vector3d::UnitY());
+  if (x.norm() < 1e-9) x = z.cross(side);
   x.normalize();
   Transform T = Transform::Identity();
   T.linear().col(0) = x;
