@@ -136,10 +136,27 @@ std::shared_ptr<Geometry> build(std::shared_ptr<const TriangleMesh> mesh) {
   return g;
 }
 
+struct HullEntry {
+  std::vector<Eigen::Vector3f> points;  ///< as given, to tell hash collisions apart
+  std::shared_ptr<const btConvexShape> shape;
+  std::vector<Eigen::Vector3f> vertices;  ///< the hull's own vertices (Bullet's, without its margin)
+  Eigen::Vector3d lo, hi;  ///< of the hull as Bullet sees it (margin included), shape frame
+};
+
+// Four floats (integers) in one SSE register: the hull's vertices are searched four at a time.
+typedef float f4 __attribute__((vector_size(16)));
+typedef int32_t i4 __attribute__((vector_size(16)));
+constexpr int kHullLanes = 4;
+
 // A query shape, built once per query: the Bullet shape for GJK and its oriented bounding box.
 struct Probe {
   const QueryShape* source = nullptr;
   std::shared_ptr<const btConvexShape> shape;
+  /// Boxes and convex hulls: the polytope's vertices (shape frame) and the radius it is rounded
+  /// by (Bullet's margin around a hull's shrunk vertices; none for a box's exact corners). The
+  /// scene's own GJK decides such shapes against triangles; Bullet's only when they penetrate.
+  std::shared_ptr<const std::vector<Eigen::Vector3f>> vertices;
+  double rounding = 0;
   bool is_sphere = false;
   bool is_box = false;
   double radius = 0;                 ///< sphere
@@ -160,6 +177,10 @@ struct Posed {
   bool has_axis = false;
   Eigen::Vector3f axis = Eigen::Vector3f::Zero();
   float axis_support = 0;
+  // Convex hulls: their vertices in the body frame, x, y and z apart in groups of four (padded
+  // with the last vertex), so that the support along a triangle's normal is a few vector steps.
+  std::vector<f4> hx, hy, hz;
+  double rounding = 0;
 };
 
 Posed pose_probe(const Probe& p, const Transform& T_body_shape) {
@@ -172,7 +193,56 @@ Posed pose_probe(const Probe& p, const Transform& T_body_shape) {
   q.hi = q.c + e;
   q.sphere_center = T_body_shape.translation();
   q.T_body_shape = to_bt(T_body_shape);
+  if (p.vertices) {
+    // The hull's own box in the body frame: much tighter than the oriented box's when the hull
+    // is long and turned (an arm's link lying across the floor).
+    const auto& v = *p.vertices;
+    q.rounding = p.rounding;
+    const size_t groups = (v.size() + kHullLanes - 1) / kHullLanes;
+    q.hx.resize(groups);
+    q.hy.resize(groups);
+    q.hz.resize(groups);
+    const Eigen::Matrix3f R = T_body_shape.rotation().cast<float>();
+    const Eigen::Vector3f t = T_body_shape.translation().cast<float>();
+    Eigen::Vector3f lo = Eigen::Vector3f::Constant(std::numeric_limits<float>::max()), hi = -lo;
+    for (size_t i = 0; i < groups * kHullLanes; ++i) {
+      const Eigen::Vector3f w = R * v[std::min(i, v.size() - 1)] + t;
+      q.hx[i / kHullLanes][i % kHullLanes] = w.x();
+      q.hy[i / kHullLanes][i % kHullLanes] = w.y();
+      q.hz[i / kHullLanes][i % kHullLanes] = w.z();
+      lo = lo.cwiseMin(w);
+      hi = hi.cwiseMax(w);
+    }
+    // The margin, and float rounding of the transformed vertices.
+    const float pad = float(q.rounding) + 1e-6f + 1e-6f * std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
+    q.lo = q.lo.cwiseMax((lo.array() - pad).matrix());
+    q.hi = q.hi.cwiseMin((hi.array() + pad).matrix());
+  }
   return q;
+}
+
+// The gap between a hull probe and a triangle along the triangle's normal, exact on that axis
+// (the hull's vertices projected on it against the triangle's plane), less the shape's margin.
+float hull_plane_gap(const Posed& q, const Eigen::Vector3f& a, const Eigen::Vector3f& b, const Eigen::Vector3f& c) {
+  Eigen::Vector3f n = (b - a).cross(c - a);
+  const float len = n.norm();
+  if (!(len > 1e-20f)) return 0.0f;
+  n /= len;
+  const float d = n.dot(a);
+  f4 mn = q.hx[0] * n.x() + q.hy[0] * n.y() + q.hz[0] * n.z(), mx = mn;
+  for (size_t i = 1; i < q.hx.size(); ++i) {
+    const f4 s = q.hx[i] * n.x() + q.hy[i] * n.y() + q.hz[i] * n.z();
+    mn = s < mn ? s : mn;
+    mx = s > mx ? s : mx;
+  }
+  float lo = mn[0], hi = mx[0];
+  for (int k = 1; k < kHullLanes; ++k) {
+    lo = std::min(lo, mn[k]);
+    hi = std::max(hi, mx[k]);
+  }
+  // Float rounding of the projections must not prune a touching triangle.
+  const float slack = float(q.rounding) + 1e-6f + 1e-6f * (std::abs(d) + std::max(std::abs(lo), std::abs(hi)));
+  return std::max(lo - d, d - hi) - slack;
 }
 
 // Gap between two axis-aligned boxes (0 when they overlap): a lower bound of their distance.
@@ -251,6 +321,177 @@ struct Hit {
   Eigen::Vector3d on_shape, on_body;
 };
 
+// The support point of a hull probe (its vertices in the body frame, without the margin) along d.
+Eigen::Vector3d hull_support(const Posed& q, const Eigen::Vector3d& d) {
+  const float dx = float(d.x()), dy = float(d.y()), dz = float(d.z());
+  const i4 lanes = {0, 1, 2, 3};
+  f4 best = q.hx[0] * dx + q.hy[0] * dy + q.hz[0] * dz;
+  i4 index = lanes;
+  for (size_t g = 1; g < q.hx.size(); ++g) {
+    const f4 s = q.hx[g] * dx + q.hy[g] * dy + q.hz[g] * dz;
+    const i4 better = s > best;
+    best = better ? s : best;
+    index = better ? lanes + int32_t(g * kHullLanes) : index;
+  }
+  int k = 0;
+  for (int j = 1; j < kHullLanes; ++j)
+    if (best[j] > best[k]) k = j;
+  const size_t i = size_t(index[k]);
+  return {q.hx[i / kHullLanes][i % kHullLanes], q.hy[i / kHullLanes][i % kHullLanes], q.hz[i / kHullLanes][i % kHullLanes]};
+}
+
+// A simplex of GJK: up to four points w = a - b of the Minkowski difference, with the points a
+// (of the shape) and b (of the triangle) that made them, and barycentric weights of the point
+// nearest the origin.
+struct Simplex {
+  std::array<Eigen::Vector3d, 4> w, a, b;
+  std::array<double, 4> weight{};
+  int n = 0;
+  Simplex() {
+    w.fill(Eigen::Vector3d::Zero());
+    a = b = w;
+  }
+  void keep(const Simplex& from, std::initializer_list<std::pair<int, double>> points) {
+    n = 0;
+    for (const auto& [i, lambda] : points) {
+      w[size_t(n)] = from.w[size_t(i)], a[size_t(n)] = from.a[size_t(i)], b[size_t(n)] = from.b[size_t(i)];
+      weight[size_t(n++)] = lambda;
+    }
+  }
+};
+
+// The point of triangle (i, j, k) of `s` nearest the origin, by Ericson's closest-point regions
+// (Real-Time Collision Detection 5.1.5); `out` gets the smallest sub-simplex that holds it.
+Eigen::Vector3d nearest_on_triangle(const Simplex& s, int i, int j, int k, Simplex& out) {
+  const Eigen::Vector3d &a = s.w[size_t(i)], &b = s.w[size_t(j)], &c = s.w[size_t(k)];
+  const Eigen::Vector3d ab = b - a, ac = c - a;
+  const double d1 = -ab.dot(a), d2 = -ac.dot(a);
+  if (d1 <= 0 && d2 <= 0) return out.keep(s, {{i, 1.0}}), a;
+  const double d3 = -ab.dot(b), d4 = -ac.dot(b);
+  if (d3 >= 0 && d4 <= d3) return out.keep(s, {{j, 1.0}}), b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const double t = d1 / (d1 - d3);
+    return out.keep(s, {{i, 1 - t}, {j, t}}), a + ab * t;
+  }
+  const double d5 = -ab.dot(c), d6 = -ac.dot(c);
+  if (d6 >= 0 && d5 <= d6) return out.keep(s, {{k, 1.0}}), c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const double t = d2 / (d2 - d6);
+    return out.keep(s, {{i, 1 - t}, {k, t}}), a + ac * t;
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return out.keep(s, {{j, 1 - t}, {k, t}}), b + (c - b) * t;
+  }
+  const double denom = 1.0 / (va + vb + vc), v = vb * denom, w = vc * denom;
+  return out.keep(s, {{i, 1 - v - w}, {j, v}, {k, w}}), a + ab * v + ac * w;
+}
+
+// The point of the simplex nearest the origin; the simplex is reduced to the smallest
+// sub-simplex that holds it. Returns false when the origin is inside a tetrahedron.
+bool nearest_on_simplex(Simplex& s, Eigen::Vector3d& v) {
+  Simplex out;
+  switch (s.n) {
+    case 1:
+      s.weight[0] = 1;
+      v = s.w[0];
+      return true;
+    case 2: {
+      const Eigen::Vector3d ab = s.w[1] - s.w[0];
+      const double t = -s.w[0].dot(ab), den = ab.squaredNorm();
+      if (t <= 0) out.keep(s, {{0, 1.0}}), v = s.w[0];
+      else if (t >= den) out.keep(s, {{1, 1.0}}), v = s.w[1];
+      else out.keep(s, {{0, 1 - t / den}, {1, t / den}}), v = s.w[0] + ab * (t / den);
+      break;
+    }
+    case 3: v = nearest_on_triangle(s, 0, 1, 2, out); break;
+    default: {
+      // The faces the origin is beyond (on the side away from the fourth vertex); none: inside.
+      static constexpr int faces[4][4] = {{0, 1, 2, 3}, {0, 1, 3, 2}, {0, 2, 3, 1}, {1, 2, 3, 0}};
+      double best = std::numeric_limits<double>::infinity();
+      for (const auto& f : faces) {
+        const Eigen::Vector3d& a = s.w[size_t(f[0])];
+        const Eigen::Vector3d n = (s.w[size_t(f[1])] - a).cross(s.w[size_t(f[2])] - a);
+        if (-n.dot(a) * n.dot(s.w[size_t(f[3])] - a) >= 0) continue;  // the origin is on the fourth vertex's side
+        Simplex k;
+        const Eigen::Vector3d x = nearest_on_triangle(s, f[0], f[1], f[2], k);
+        if (x.squaredNorm() < best) {
+          best = x.squaredNorm();
+          v = x;
+          out = k;
+        }
+      }
+      if (!(best < std::numeric_limits<double>::infinity())) return false;
+    }
+  }
+  s = out;
+  return true;
+}
+
+// A hull probe against one triangle by GJK (Gilbert, Johnson & Keerthi 1988) on the hull's
+// vertices in the body frame, whose support is a short vector loop (Bullet's GJK on the same
+// hull costs about four times as much). Decides:
+//  - `beyond`: farther than `reach` (surface distance, the shape's margin counted), as soon as
+//    the lower bound v . w / |v| (w the support of the difference along -v) exceeds it; the
+//    separating direction is kept in q for pruning the next triangles;
+//  - `hit`: nearer than `reach`, converged to the distance with its witness points;
+//  - `undecided`: penetrating or touching (EPA's job), or not converged.
+enum class GjkOutcome { beyond, hit, undecided };
+
+GjkOutcome hull_triangle(Posed& q, const Geometry::Tri& t, double reach, Hit& hit) {
+  const Eigen::Vector3d tri[3] = {t.a.cast<double>(), t.b.cast<double>(), t.c.cast<double>()};
+  const auto triangle_support = [&](const Eigen::Vector3d& d) -> const Eigen::Vector3d& {
+    const double s0 = d.dot(tri[0]), s1 = d.dot(tri[1]), s2 = d.dot(tri[2]);
+    return s0 >= s1 && s0 >= s2 ? tri[0] : (s1 >= s2 ? tri[1] : tri[2]);
+  };
+  // The hull's vertices are floats: a little slack before calling anything beyond reach.
+  const double threshold = reach + q.rounding + 1e-6 + 1e-6 * tri[0].cwiseAbs().maxCoeff();
+  Simplex s;
+  // Start from the last separating direction when there is one (neighbouring triangles share it).
+  Eigen::Vector3d d = q.has_axis ? Eigen::Vector3d(-q.axis.cast<double>()) : Eigen::Vector3d(q.c.cast<double>() - tri[0]);
+  s.a[0] = hull_support(q, -d);
+  s.b[0] = triangle_support(d);
+  s.w[0] = s.a[0] - s.b[0];
+  s.n = 1;
+  Eigen::Vector3d v;
+  nearest_on_simplex(s, v);
+  for (int iteration = 0; iteration < 64; ++iteration) {
+    const double vv = v.squaredNorm();
+    if (vv < 1e-14) return GjkOutcome::undecided;  // touching or penetrating
+    const Eigen::Vector3d a = hull_support(q, -v), b = triangle_support(v), w = a - b;
+    const double vw = v.dot(w), norm = std::sqrt(vv);
+    if (vw > threshold * norm) {
+      const Eigen::Vector3d axis = -v / norm;  // from the shape towards the triangle
+      q.has_axis = true;
+      q.axis = axis.cast<float>();
+      q.axis_support = float(axis.dot(hull_support(q, axis)) + q.rounding) + 1e-6f;
+      return GjkOutcome::beyond;
+    }
+    // Converged: no support point gets nearer (Bullet's relative tolerance), or w is not new.
+    bool repeated = false;
+    for (int i = 0; i < s.n; ++i) repeated = repeated || s.w[size_t(i)] == w;
+    if (vv - vw <= 1e-6 * vv || repeated) {
+      if (norm > threshold) return GjkOutcome::undecided;  // should not happen: the bound said otherwise
+      Eigen::Vector3d on_a = Eigen::Vector3d::Zero(), on_b = Eigen::Vector3d::Zero();
+      for (int i = 0; i < s.n; ++i) {
+        on_a += s.weight[size_t(i)] * s.a[size_t(i)];
+        on_b += s.weight[size_t(i)] * s.b[size_t(i)];
+      }
+      hit.distance = norm - q.rounding;
+      hit.on_body = on_b;
+      hit.on_shape = on_a - v / norm * q.rounding;
+      return hit.distance <= reach ? GjkOutcome::hit : GjkOutcome::beyond;
+    }
+    s.w[size_t(s.n)] = w, s.a[size_t(s.n)] = a, s.b[size_t(s.n)] = b;
+    ++s.n;
+    if (!nearest_on_simplex(s, v)) return GjkOutcome::undecided;  // the origin inside: penetrating
+  }
+  return GjkOutcome::undecided;
+}
+
 std::optional<Hit> narrow(const Probe& p, Posed& q, const Geometry::Tri& t, double reach) {
   if (p.is_sphere) {
     const Eigen::Vector3d a = t.a.cast<double>(), b = t.b.cast<double>(), c = t.c.cast<double>();
@@ -262,11 +503,22 @@ std::optional<Hit> narrow(const Probe& p, Posed& q, const Geometry::Tri& t, doub
     if (!(centre > 1e-12)) n = (b - a).cross(c - a).normalized();  // centre on the triangle
     return Hit{centre - p.radius, q.sphere_center - n * p.radius, on};
   }
+  if (!q.hx.empty()) {
+    Hit hit;
+    switch (hull_triangle(q, t, reach, hit)) {
+      case GjkOutcome::beyond: return std::nullopt;
+      case GjkOutcome::hit: return hit;
+      case GjkOutcome::undecided: break;  // penetrating: Bullet's GJK and EPA
+    }
+  }
   btTriangleShape tri(to_bt(t.a), to_bt(t.b), to_bt(t.c));
   tri.setMargin(0);
   btVoronoiSimplexSolver simplex;
   btGjkEpaPenetrationDepthSolver epa;
   btGjkPairDetector gjk(p.shape.get(), &tri, &simplex, &epa);
+  // Warm start: the last separating direction (from the triangle towards the shape; Bullet's
+  // axis points from B to A) is usually close for the next triangle, and saves GJK iterations.
+  if (q.has_axis) gjk.setCachedSeparatingAxis(btVector3(-q.axis.x(), -q.axis.y(), -q.axis.z()));
   btGjkPairDetector::ClosestPointInput in;
   in.m_transformA = q.T_body_shape;
   in.m_transformB.setIdentity();
@@ -300,6 +552,7 @@ void traverse(const Geometry& g, Posed& q, bool nearest_first, Reach&& reach, Vi
       for (int i = node.index; i < node.index + node.count; ++i) {
         const auto& t = g.tris[size_t(i)];
         if (triangle_bound(q, t) > reach()) continue;
+        if (!q.hx.empty() && hull_plane_gap(q, t.a, t.b, t.c) > reach()) continue;
         if (!visit(t)) return;
       }
       continue;
@@ -316,12 +569,6 @@ void traverse(const Geometry& g, Posed& q, bool nearest_first, Reach&& reach, Vi
     if (gfirst <= r) stack[size_t(top++)] = first;
   }
 }
-
-struct HullEntry {
-  std::vector<Eigen::Vector3f> points;  ///< as given, to tell hash collisions apart
-  std::shared_ptr<const btConvexShape> shape;
-  Eigen::Vector3d lo, hi;  ///< of the hull as Bullet sees it (margin included), shape frame
-};
 
 uint64_t hash_points(const std::vector<Eigen::Vector3f>& points) {
   uint64_t h = 1469598103934665603ull ^ points.size();
@@ -422,6 +669,7 @@ struct CollisionScene::Impl {
     e->hi = -e->lo;
     for (int i = 0; i < hull->getNumPoints(); ++i) {
       const Eigen::Vector3d v = to_eigen(hull->getUnscaledPoints()[i]);
+      e->vertices.push_back(v.cast<float>());
       e->lo = e->lo.cwiseMin(v);
       e->hi = e->hi.cwiseMax(v);
     }
@@ -447,6 +695,13 @@ struct CollisionScene::Impl {
         shape = std::make_shared<btBoxShape>(btVector3(s.size.x() / 2, s.size.y() / 2, s.size.z() / 2));
         p.obb_half = s.size / 2;
         p.is_box = true;
+        {
+          auto corners = std::make_shared<std::vector<Eigen::Vector3f>>();
+          for (int i = 0; i < 8; ++i)
+            corners->emplace_back(float((i & 1 ? 0.5 : -0.5) * s.size.x()), float((i & 2 ? 0.5 : -0.5) * s.size.y()),
+                                  float((i & 4 ? 0.5 : -0.5) * s.size.z()));
+          p.vertices = std::move(corners);
+        }
         break;
       case QueryShape::Kind::sphere:
         if (!(std::isfinite(s.radius_m) && s.radius_m > 0)) throw bad("sphere radius must be positive");
@@ -475,6 +730,8 @@ struct CollisionScene::Impl {
           if (!q.allFinite()) throw bad("hull point is not finite");
         const auto hull = hull_for(s);
         p.shape = hull->shape;
+        p.vertices = std::shared_ptr<const std::vector<Eigen::Vector3f>>(hull, &hull->vertices);
+        p.rounding = kShapeMargin;
         p.obb_center_shape = 0.5 * (hull->lo + hull->hi);
         p.obb_half = 0.5 * (hull->hi - hull->lo);
         p.obb_half.array() += 1e-6;
