@@ -163,6 +163,67 @@ TEST_F(WorldModelTest, EnvironmentIsRecutInTheBackgroundAfterAnEdit) {
   EXPECT_TRUE(wm.refresh().empty());
 }
 
+// Method: with the environment re-cut in the background, an edit updates only the object it
+// made (read back from its new row, not the whole folder). After every kind of edit the objects
+// must be exactly what a full reload of the folder gives, and a full refresh finds nothing new.
+TEST_F(WorldModelTest, AnEditUpdatesItsObjectAsAFullReloadWould) {
+  WorldModelOptions options;
+  options.environment_in_background = true;
+  WorldModel wm(ws, "/cell", options);
+  const auto same_as_reload = [&](const std::string& step) {
+    WorldModel fresh(ws, "/cell", options);
+    std::map<ObjectId, const SceneObject*> reloaded;
+    for (const auto& o : fresh.objects()) reloaded[o.object_id] = &o;
+    ASSERT_EQ(wm.objects().size(), fresh.objects().size()) << step;
+    for (const auto& o : wm.objects()) {
+      ASSERT_TRUE(reloaded.count(o.object_id)) << step << ": " << o.path;
+      const auto& r = *reloaded[o.object_id];
+      if (o.kind == SceneObject::Kind::environment) continue;  // re-cut later, in the background
+      EXPECT_EQ(o.version_id, r.version_id) << step;
+      EXPECT_EQ(o.version, r.version) << step;
+      EXPECT_EQ(o.path, r.path) << step;
+      EXPECT_EQ(o.status, r.status) << step;
+      EXPECT_EQ(o.attached_to, r.attached_to) << step;
+      EXPECT_EQ(o.mesh_hash, r.mesh_hash) << step;
+      EXPECT_EQ(o.model, r.model) << step;
+      EXPECT_TRUE(o.T_world_object.isApprox(r.T_world_object, 1e-12)) << step;
+      ASSERT_EQ(o.T_world_grasps.size(), r.T_world_grasps.size()) << step;
+      for (size_t g = 0; g < o.T_world_grasps.size(); ++g) EXPECT_TRUE(o.T_world_grasps[g].isApprox(r.T_world_grasps[g], 1e-9)) << step;
+      EXPECT_EQ(wm.collision().contains(o.object_id), o.attached_to.empty()) << step;
+    }
+    const auto revision = wm.revision();
+    EXPECT_TRUE(wm.refresh().empty()) << step;
+    EXPECT_EQ(wm.revision(), revision) << step;
+  };
+  const Transform moved = Transform(Eigen::Translation3d(-0.3, 0.2, 0)) * f.T_world_bunny;
+  auto r = wm.revision();
+  wm.correct_pose(f.bunny, moved, "alice");
+  EXPECT_EQ(wm.last_changes().changed, std::vector<ObjectId>{f.bunny});
+  EXPECT_GT(wm.revision(), r);
+  EXPECT_TRUE(wm.collision().check({ball(moved * f.bunny_mesh.bounds().center().cast<double>(), 0.02)}).in_collision);
+  same_as_reload("correct");
+  wm.accept_pose(f.bunny, "alice");
+  same_as_reload("accept");
+  wm.attach(f.bunny, "ur5/tool0", Transform::Identity(), "bob");
+  same_as_reload("attach");
+  wm.detach(f.bunny, "bob");
+  same_as_reload("detach");
+  r = wm.revision();
+  const ObjectId added = wm.add_object("bunny", Transform(Eigen::Translation3d(0.3, 0.3, 0.0)), "carol");
+  EXPECT_EQ(wm.last_changes().changed, std::vector<ObjectId>{added});
+  EXPECT_GT(wm.revision(), r);
+  same_as_reload("add");
+  wm.remove_object(f.bunny, "dave");
+  EXPECT_EQ(wm.last_changes().removed, std::vector<ObjectId>{f.bunny});
+  EXPECT_FALSE(wm.collision().contains(f.bunny));
+  same_as_reload("delete");
+  // The environment's re-cut follows, for the objects as they are now.
+  SceneChanges env_changes;
+  for (int i = 0; i < 3 && env_changes.empty(); ++i) env_changes = wm.poll_environment(true);
+  EXPECT_EQ(env_changes.changed, std::vector<ObjectId>{f.environment});
+  EXPECT_EQ(WorldModel(ws, "/cell").objects()[0].mesh_hash, wm.objects()[0].mesh_hash);
+}
+
 TEST_F(WorldModelTest, ChangesFromOtherProcessesAreSeenByRefresh) {
   WorldModel wm(ws, "/cell");
   // Someone else (e.g. `artisan recognize`) adds an instance.
@@ -546,6 +607,12 @@ TEST(WorldFrame, AMultiMeshIsPlacedByItsRootImagesSensorPose) {
     // Collision in the world frame: a ball on the patch's centre in the world.
     EXPECT_TRUE(wm.collision().check({ball(T_world_sensor * Eigen::Vector3d(0.1, 0.1, 0), 0.01)}).in_collision);
     EXPECT_FALSE(wm.collision().check({ball(Eigen::Vector3d(0.1, 0.1, 0), 0.01)}).in_collision);
+    // Accepting the pose keeps it where it is in the world (the edit's version is not derived
+    // from the mesh the pose is relative to), now and after a restart.
+    wm.accept_pose(in_merged, "alice");
+    EXPECT_TRUE(wm.find(in_merged)->T_world_object.isApprox(T_world_sensor * T_root_b * T_b_block, 1e-9));
+    WorldModel again(ws, "/posed");
+    EXPECT_TRUE(again.find(in_merged)->T_world_object.isApprox(T_world_sensor * T_root_b * T_b_block, 1e-9));
   }
   // The root image knows no pose: the MultiMesh's own frame, as before.
   const auto [block2, mm2] = build("/unposed", false);

@@ -798,6 +798,11 @@ bool CollisionScene::remove(int64_t id) { return impl_->bodies.erase(id) > 0; }
 
 bool CollisionScene::contains(int64_t id) const { return impl_->bodies.count(id) > 0; }
 
+std::shared_ptr<const BodyGeometry> CollisionScene::geometry(int64_t id) const {
+  const auto it = impl_->bodies.find(id);
+  return it == impl_->bodies.end() ? nullptr : it->second.geometry;
+}
+
 std::vector<int64_t> CollisionScene::bodies() const {
   std::vector<int64_t> ids;
   for (const auto& [id, body] : impl_->bodies) ids.push_back(id);

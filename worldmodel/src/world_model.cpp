@@ -167,6 +167,55 @@ ObjectId WorldModel::first_version(const ObjectInfo& info) {
   return it->second;
 }
 
+SceneObject WorldModel::scene_object(const ObjectInfo& o, const std::map<ObjectId, Transform>& T_world_mesh,
+                                     const std::vector<SceneRobot>& robots) {
+  const auto& md = o.metadata;
+  SceneObject s;
+  s.object_id = first_version(o);
+  s.version_id = o.id;
+  s.version = o.version;
+  s.path = o.path;
+  s.kind = SceneObject::Kind::object;
+  s.status = md.value("status", std::string("recognized"));
+  s.model_id = md.at("model_id").get<ObjectId>();
+  auto model_it = model_infos_.find(s.model_id);
+  if (model_it == model_infos_.end()) model_it = model_infos_.emplace(s.model_id, ws_.get(s.model_id)).first;
+  const auto& model = model_it->second;
+  s.model = model.name;
+  if (md.contains("T_world_object")) {
+    s.T_world_object = transform_from_json(md["T_world_object"], o.path);
+  } else {
+    Transform T_world_scene = Transform::Identity();
+    if (const auto prov = ws_.provenance(o.id); prov && !prov->inputs.empty())
+      if (auto it = T_world_mesh.find(prov->inputs.front()); it != T_world_mesh.end()) T_world_scene = it->second;
+    s.T_world_object = T_world_scene * transform_from_json(md.at("T_scene_model"), o.path);
+  }
+  if (md.contains("figures")) {
+    s.score = md["figures"].value("score", 0.0);
+    s.overlap = md["figures"].value("overlap", 0.0);
+    s.ambiguous = md["figures"].value("ambiguous", false);
+  }
+  if (model.metadata.contains("T_model_grasps"))
+    for (const auto& g : model.metadata["T_model_grasps"]) s.T_world_grasps.push_back(s.T_world_object * transform_from_json(g, model.path));
+  if (md.contains("attached_to")) {
+    s.attached_to = md["attached_to"].get<std::string>();
+    s.T_link_object = transform_from_json(md.at("T_link_object"), o.path);
+    // Carried by a robot of the scene: where its link is now.
+    const auto [robot_name, link] = robot_and_link(s.attached_to);
+    for (const auto& r : robots)
+      if (r.name == robot_name && r.T_world_links.count(link)) {
+        const Transform T_world_object = r.T_world_links.at(link) * s.T_link_object;
+        for (auto& g : s.T_world_grasps) g = T_world_object * s.T_world_object.inverse() * g;
+        s.T_world_object = T_world_object;
+      }
+  }
+  s.margin_m = options_.object_margin_m;
+  auto& mesh = model_meshes_[s.model_id];
+  if (!mesh) mesh = std::make_shared<const TriangleMesh>(ws_.load_mesh(s.model_id));
+  s.mesh = mesh;
+  return s;
+}
+
 WorldModel::Loaded WorldModel::load() {
   Loaded out;
   std::vector<ObjectInfo> all;
@@ -243,55 +292,10 @@ WorldModel::Loaded WorldModel::load() {
   });
 
   // Recognized objects.
-  std::map<ObjectId, ObjectInfo> models;
   for (const auto& o : all) {
     if (o.kind != ObjectKind::kRecognizedModel) continue;
-    const auto& md = o.metadata;
-    const std::string status = md.value("status", std::string("recognized"));
-    if (status == "deleted") continue;
-    SceneObject s;
-    s.object_id = first_version(o);
-    s.version_id = o.id;
-    s.version = o.version;
-    s.path = o.path;
-    s.kind = SceneObject::Kind::object;
-    s.status = status;
-    s.model_id = md.at("model_id").get<ObjectId>();
-    if (!models.count(s.model_id)) models[s.model_id] = ws_.get(s.model_id);
-    const auto& model = models[s.model_id];
-    s.model = model.name;
-    if (md.contains("T_world_object")) {
-      s.T_world_object = transform_from_json(md["T_world_object"], o.path);
-    } else {
-      Transform T_world_scene = Transform::Identity();
-      if (const auto prov = ws_.provenance(o.id); prov && !prov->inputs.empty())
-        if (auto it = T_world_mesh.find(prov->inputs.front()); it != T_world_mesh.end()) T_world_scene = it->second;
-      s.T_world_object = T_world_scene * transform_from_json(md.at("T_scene_model"), o.path);
-    }
-    if (md.contains("figures")) {
-      s.score = md["figures"].value("score", 0.0);
-      s.overlap = md["figures"].value("overlap", 0.0);
-      s.ambiguous = md["figures"].value("ambiguous", false);
-    }
-    if (model.metadata.contains("T_model_grasps"))
-      for (const auto& g : model.metadata["T_model_grasps"]) s.T_world_grasps.push_back(s.T_world_object * transform_from_json(g, model.path));
-    if (md.contains("attached_to")) {
-      s.attached_to = md["attached_to"].get<std::string>();
-      s.T_link_object = transform_from_json(md.at("T_link_object"), o.path);
-      // Carried by a robot of the scene: where its link is now.
-      const auto [robot_name, link] = robot_and_link(s.attached_to);
-      for (const auto& r : out.robots)
-        if (r.name == robot_name && r.T_world_links.count(link)) {
-          const Transform T_world_object = r.T_world_links.at(link) * s.T_link_object;
-          for (auto& g : s.T_world_grasps) g = T_world_object * s.T_world_object.inverse() * g;
-          s.T_world_object = T_world_object;
-        }
-    }
-    s.margin_m = options_.object_margin_m;
-    auto& mesh = model_meshes_[s.model_id];
-    if (!mesh) mesh = std::make_shared<const TriangleMesh>(ws_.load_mesh(s.model_id));
-    s.mesh = mesh;
-    out.objects.push_back(std::move(s));
+    if (o.metadata.value("status", std::string("recognized")) == "deleted") continue;
+    out.objects.push_back(scene_object(o, T_world_mesh, out.robots));
   }
 
   // The environment: its meshes in the world frame, less the recognized objects' surface.
@@ -308,20 +312,7 @@ WorldModel::Loaded WorldModel::load() {
     // only objects did.
     std::string whole_signature;
     for (const auto& [info, T] : environment) whole_signature += std::to_string(info.id) + to_row_major_string(T) + ";";
-    auto cut = std::make_shared<EnvironmentCut>();
-    cut->whole_signature = whole_signature;
-    cut->signature = whole_signature + "|";
-    for (const auto& s : out.objects) {
-      cut->signature += std::to_string(s.version_id) + to_row_major_string(s.T_world_object) + ";";
-      cut->objects.emplace_back(s.mesh, s.T_world_object);
-    }
-    if (options_.cut_out_robots)
-      for (const auto& r : out.robots)
-        for (const auto& [link, mesh] : r.model->link_meshes()) {
-          cut->signature += "robot" + std::to_string(r.version_id) + "/" + link + ";";
-          cut->objects.emplace_back(mesh, r.T_world_links.at(link));
-        }
-    cut->cutout_distance_m = options_.cutout_distance_m;
+    auto cut = make_cut(whole_signature, out.objects, out.robots);
     bool new_whole = false;
     if (whole_signature != whole_signature_ || !whole_environment_) {
       TriangleMesh whole;
@@ -348,6 +339,27 @@ WorldModel::Loaded WorldModel::load() {
     out.objects.insert(out.objects.begin(), std::move(env));
   }
   return out;
+}
+
+std::shared_ptr<WorldModel::EnvironmentCut> WorldModel::make_cut(const std::string& whole_signature, const std::vector<SceneObject>& objects,
+                                                                  const std::vector<SceneRobot>& robots) const {
+  auto cut = std::make_shared<EnvironmentCut>();
+  cut->whole_signature = whole_signature;
+  cut->signature = whole_signature + "|";
+  for (const auto& s : objects) {
+    if (s.kind != SceneObject::Kind::object) continue;
+    cut->signature += std::to_string(s.version_id) + to_row_major_string(s.T_world_object) + ";";
+    cut->objects.emplace_back(s.mesh, s.T_world_object);
+  }
+  if (options_.cut_out_robots)
+    for (const auto& r : robots)
+      for (const auto& [link, mesh] : r.model->link_meshes()) {
+        cut->signature += "robot" + std::to_string(r.version_id) + "/" + link + ";";
+        cut->objects.emplace_back(mesh, r.T_world_links.at(link));
+      }
+  cut->cutout_distance_m = options_.cutout_distance_m;
+  cut->whole = whole_environment_;
+  return cut;
 }
 
 SceneChanges WorldModel::refresh() {
@@ -432,6 +444,10 @@ SceneChanges WorldModel::poll_environment(bool wait) {
     // Made from the environment meshes still in use: at least as new as the cut in place.
     auto env = std::find_if(objects_.begin(), objects_.end(), [](const SceneObject& o) { return o.kind == SceneObject::Kind::environment; });
     if (cut->whole_signature == whole_signature_ && cut->signature != environment_signature_ && env != objects_.end()) {
+      // The environment it replaces (mesh, hierarchy, encoding: tens of megabytes for millions of
+      // triangles) is freed on another thread: unmapping that much takes milliseconds, which the
+      // diff to clients should not wait for.
+      std::vector<std::shared_ptr<const void>> garbage = {environment_mesh_, collision_->geometry(env->object_id)};
       environment_mesh_ = cut->mesh;
       environment_signature_ = cut->signature;
       encoded_.try_emplace(cut->hash, std::move(cut->encoded));
@@ -441,13 +457,29 @@ SceneChanges WorldModel::poll_environment(bool wait) {
       changes.changed.push_back(env->object_id);
       std::set<std::string> used;
       for (const auto& o : objects_) used.insert(o.mesh_hash);
-      std::erase_if(encoded_, [&](const auto& kv) { return !used.count(kv.first); });
+      for (auto it = encoded_.begin(); it != encoded_.end();) {
+        if (used.count(it->first)) {
+          ++it;
+          continue;
+        }
+        garbage.push_back(std::make_shared<const std::vector<uint8_t>>(std::move(it->second)));
+        it = encoded_.erase(it);
+      }
+      release(std::move(garbage));
       ++revision_;
       last_changes_ = changes;
     }
   }
   start_environment_job();  // objects moved again meanwhile
   return changes;
+}
+
+void WorldModel::release(std::vector<std::shared_ptr<const void>> garbage) {
+  if (release_.valid()) release_.wait();  // the previous batch: long gone by now
+  release_ = std::async(std::launch::async, [garbage = std::move(garbage)]() mutable {
+    setpriority(PRIO_PROCESS, pid_t(::gettid()), 10);
+    garbage.clear();
+  });
 }
 
 const SceneRobot& WorldModel::robot(const std::string& name) const {
@@ -555,11 +587,62 @@ ObjectId WorldModel::edit(ObjectId object_id, const std::string& action, const s
     if (v.is_null()) next.metadata.erase(k);
     else next.metadata[k] = v;
   }
+  // The pose it had when edited, in the world: a recognized object's first version holds it
+  // relative to the mesh it was found in, which the edit's provenance does not name.
+  if (!next.metadata.contains("T_world_object")) next.metadata["T_world_object"] = to_row_major(o.T_world_object);
   next.metadata["edit"] = {{"action", action}, {"author", author}, {"at", utc_now()}};
   next.provenance = Provenance{"operator-edit", {{"action", action}, {"author", author}}, {o.version_id}};
+  const ObjectId stable_id = o.object_id;
   const ObjectId id = ws_.add_version(o.version_id, next);
-  refresh();
+  apply_edit(stable_id, id);
   return id;
+}
+
+// One object changed by this world model's own edit: only it is read back (and the environment
+// cut's inputs renewed), not the whole folder. Without a background re-cut, the edit must re-cut
+// the environment before returning anyway, which the full refresh does.
+void WorldModel::apply_edit(ObjectId object_id, ObjectId version_id) {
+  if (!options_.environment_in_background) {
+    refresh();
+    return;
+  }
+  SceneChanges changes;
+  const ObjectInfo info = ws_.get(version_id);
+  const auto old = std::find_if(objects_.begin(), objects_.end(), [&](const SceneObject& x) { return object_id && x.object_id == object_id; });
+  if (object_id) first_versions_[version_id] = object_id;
+  if (info.metadata.value("status", std::string("recognized")) == "deleted") {
+    if (old != objects_.end()) {
+      collision_->remove(old->object_id);
+      changes.removed.push_back(old->object_id);
+      objects_.erase(old);
+    }
+  } else {
+    SceneObject o = scene_object(info, {}, robots_);
+    const auto same_mesh = std::find_if(objects_.begin(), objects_.end(), [&](const SceneObject& x) { return x.mesh == o.mesh; });
+    if (same_mesh != objects_.end()) {
+      o.mesh_hash = same_mesh->mesh_hash;
+    } else {
+      auto bytes = io::encode_mesh(*o.mesh);
+      o.mesh_hash = content_hash(bytes);
+      encoded_.try_emplace(o.mesh_hash, std::move(bytes));
+    }
+    if (!o.attached_to.empty()) {
+      collision_->remove(o.object_id);
+      if (!attached_hulls_.count(o.mesh.get())) attached_hulls_[o.mesh.get()] = {o.mesh, convex_hull_vertices(o.mesh->vertices)};
+    } else if (collision_->contains(o.object_id)) {
+      collision_->set_pose(o.object_id, o.T_world_object);
+    } else {
+      collision_->set_body(o.object_id, o.mesh, o.T_world_object, o.margin_m);
+    }
+    changes.changed.push_back(o.object_id);
+    if (old != objects_.end()) *old = std::move(o);
+    else objects_.push_back(std::move(o));
+  }
+  // The environment's cut now asks for these objects: poll_environment() starts it.
+  if (latest_) latest_ = make_cut(whole_signature_, objects_, robots_);
+  constexpr int64_t kPerRow = 1000;
+  revision_ = std::max(revision_ + 1, version_id * kPerRow);
+  last_changes_ = changes;
 }
 
 ObjectId WorldModel::correct_pose(ObjectId object_id, const Transform& T_world_object, const std::string& author) {
@@ -618,7 +701,7 @@ ObjectId WorldModel::add_object(const std::string& model, const Transform& T_wor
                 {"edit", {{"action", "add"}, {"author", author}, {"at", utc_now()}}}};
   o.provenance = Provenance{"operator-add", {{"author", author}}, {m->id}};
   const ObjectId id = ws_.add(folder, o);
-  refresh();
+  apply_edit(0, id);
   return id;
 }
 

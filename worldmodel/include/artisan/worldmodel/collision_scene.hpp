@@ -96,6 +96,9 @@ class CollisionScene {
   void set_pose(int64_t id, const Transform& T_world_body);
   /// Returns false when there was no such body.
   bool remove(int64_t id);
+  /// Body `id`'s hierarchy (nullptr when there is no such body): whoever holds it last frees it,
+  /// which for millions of triangles takes milliseconds.
+  std::shared_ptr<const BodyGeometry> geometry(int64_t id) const;
   bool contains(int64_t id) const;
   std::vector<int64_t> bodies() const;
   size_t triangle_count() const;  ///< over all bodies

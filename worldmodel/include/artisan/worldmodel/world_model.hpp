@@ -160,6 +160,15 @@ class WorldModel {
   struct Loaded;
   struct EnvironmentCut;
   Loaded load();
+  /// The scene object of a recognized model's row (T_world_mesh: where the meshes it may have been
+  /// found in sit, for rows that hold their pose relative to that mesh).
+  SceneObject scene_object(const ObjectInfo& row, const std::map<ObjectId, Transform>& T_world_mesh, const std::vector<SceneRobot>& robots);
+  /// The inputs of the environment's cut for these objects and robots.
+  std::shared_ptr<EnvironmentCut> make_cut(const std::string& whole_signature, const std::vector<SceneObject>& objects,
+                                           const std::vector<SceneRobot>& robots) const;
+  /// After this model's own edit made row `version_id` (a new version of `object_id`, or 0 for a
+  /// new object): updates that object alone.
+  void apply_edit(ObjectId object_id, ObjectId version_id);
   void start_environment_job();
   ObjectId edit(ObjectId object_id, const std::string& action, const std::string& author, nlohmann::json changes);
   const SceneObject& object_or_throw(ObjectId object_id) const;
@@ -179,6 +188,7 @@ class WorldModel {
   std::map<const TriangleMesh*, std::pair<std::shared_ptr<const TriangleMesh>, std::vector<Eigen::Vector3f>>> attached_hulls_;
   std::unique_ptr<CollisionScene> collision_;
   mutable std::map<ObjectId, std::shared_ptr<const TriangleMesh>> model_meshes_;  ///< by model row
+  std::map<ObjectId, ObjectInfo> model_infos_;                                    ///< by model row (rows never change)
   std::map<std::string, std::vector<uint8_t>> encoded_;                          ///< by hash
   std::string environment_signature_;  ///< the meshes and cut-out objects it was made from
   std::shared_ptr<const TriangleMesh> environment_mesh_;
@@ -186,6 +196,9 @@ class WorldModel {
   std::shared_ptr<const TriangleMesh> whole_environment_;  ///< uncut, in the world frame
   std::shared_ptr<const EnvironmentCut> latest_;  ///< the cut the objects ask for now (its inputs)
   std::future<std::unique_ptr<EnvironmentCut>> job_;
+  /// Frees what a new environment replaced on another thread (see poll_environment()).
+  void release(std::vector<std::shared_ptr<const void>> garbage);
+  std::future<void> release_;
 };
 
 /// 16 hex digits of FNV-1a 64 over `bytes`.
