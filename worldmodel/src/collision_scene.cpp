@@ -7,9 +7,14 @@
 //    so far for distance queries). Lower bounds: the gap between axis-aligned boxes, and the
 //    separating-axis gaps against the shape's oriented bounding box (its 3 axes for nodes; for
 //    triangles all 13 box/triangle axes, Akenine-Moeller 2001, which for a box is exact);
+//    Boxes and convex hulls also prune by their own vertices: the hull's box in the body frame
+//    and the triangle's normal axis;
 //  - deciding, exactly, per surviving triangle: closest point on the triangle for spheres
-//    (Ericson, Real-Time Collision Detection 5.1.5), Bullet's GJK (EPA when penetrating) for the
-//    other shapes.
+//    (Ericson, Real-Time Collision Detection 5.1.5); for boxes and hulls, GJK on their vertices
+//    (a vectorized support, warm-started from the last separating direction, witnesses from the
+//    simplex's barycentric weights); Bullet's GJK/EPA for cylinders and capsules, and for boxes
+//    and hulls that penetrate (the depth is EPA's). Bullet's GJK on a hull is about four times
+//    slower per triangle and stops up to 0.4 mm short of the true distance.
 // Collision checks stop a (shape, body) pair at its first colliding triangle unless the deepest
 // contact is asked for; distance queries visit nearer children first and shrink the reach as
 // they go (closest pair with branch and bound), as FCL does, and stop at the first penetration.

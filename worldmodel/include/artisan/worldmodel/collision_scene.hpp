@@ -4,7 +4,8 @@
 // shapes (boxes, spheres, cylinders, capsules, convex hulls) at poses: collision, minimum
 // distance with witness points, and ray casts. Exact on the triangles: the hierarchy only prunes
 // (oriented-box separating axes, distance lower bounds), and every triangle that may be within
-// reach is decided by an exact narrow phase (point-triangle for spheres, GJK/EPA otherwise).
+// reach is decided by an exact narrow phase (point-triangle for spheres, GJK otherwise, EPA for
+// penetration depths).
 #include <cstdint>
 #include <memory>
 #include <optional>

@@ -9,14 +9,15 @@
 // mesh was made from knows it (simulated and tracked sensors: image metadata
 // sensor.T_world_sensor), else at the identity; a merged mesh sits where its MultiMesh does; a
 // lone mesh at its own sensor pose when known. Recognized objects follow the mesh they were
-// found in. Operator edits (correct or accept a pose, attach,
-// detach, delete, add) are stored in the workspace as new versions with author and time, and
-// refresh() rebuilds only what changed.
+// found in, until an operator edits them: an edit's version holds the world pose. Operator edits
+// (correct or accept a pose, attach, detach, delete, add) are stored in the workspace as new
+// versions with author and time, and refresh() rebuilds only what changed.
 //
 // The environment's cut (and its encoding, hash and hierarchy) depends on every object's pose,
 // and takes seconds for a million triangles. With `environment_in_background`, an edit updates
-// the objects at once and leaves the re-cut to a worker thread; poll_environment() installs it
-// as a change of its own. Until then the environment stays as cut before the edit.
+// its object at once (reading back only that object's new row) and leaves the re-cut to a worker
+// thread; poll_environment() installs it as a change of its own, and frees the environment it
+// replaces on another thread. Until then the environment stays as cut before the edit.
 #include <cstdint>
 #include <future>
 #include <map>
