@@ -362,6 +362,15 @@ std::shared_ptr<WorldModel::EnvironmentCut> WorldModel::make_cut(const std::stri
   return cut;
 }
 
+std::string WorldModel::mesh_hash(const std::shared_ptr<const TriangleMesh>& mesh) {
+  const auto same_mesh = std::find_if(objects_.begin(), objects_.end(), [&](const SceneObject& x) { return x.mesh == mesh; });
+  if (same_mesh != objects_.end()) return same_mesh->mesh_hash;
+  auto bytes = io::encode_mesh(*mesh);
+  std::string hash = content_hash(bytes);
+  encoded_.try_emplace(hash, std::move(bytes));
+  return hash;
+}
+
 SceneChanges WorldModel::refresh() {
   Loaded loaded = load();
   SceneChanges changes;
@@ -372,14 +381,7 @@ SceneChanges WorldModel::refresh() {
     now.insert(o.object_id);
     // Encode (and hash) each distinct mesh once.
     const auto old = before.find(o.object_id);
-    const auto same_mesh = std::find_if(objects_.begin(), objects_.end(), [&](const SceneObject& x) { return x.mesh == o.mesh; });
-    if (same_mesh != objects_.end()) {
-      o.mesh_hash = same_mesh->mesh_hash;
-    } else {
-      auto bytes = io::encode_mesh(*o.mesh);
-      o.mesh_hash = content_hash(bytes);
-      encoded_.try_emplace(o.mesh_hash, std::move(bytes));
-    }
+    o.mesh_hash = mesh_hash(o.mesh);
     if (old != before.end() && old->second->same_state(o) && old->second->mesh_hash == o.mesh_hash) {
       o.mesh = old->second->mesh;  // keep the pointer so the collision hierarchy is reused
       continue;
@@ -618,14 +620,7 @@ void WorldModel::apply_edit(ObjectId object_id, ObjectId version_id) {
     }
   } else {
     SceneObject o = scene_object(info, {}, robots_);
-    const auto same_mesh = std::find_if(objects_.begin(), objects_.end(), [&](const SceneObject& x) { return x.mesh == o.mesh; });
-    if (same_mesh != objects_.end()) {
-      o.mesh_hash = same_mesh->mesh_hash;
-    } else {
-      auto bytes = io::encode_mesh(*o.mesh);
-      o.mesh_hash = content_hash(bytes);
-      encoded_.try_emplace(o.mesh_hash, std::move(bytes));
-    }
+    o.mesh_hash = mesh_hash(o.mesh);
     if (!o.attached_to.empty()) {
       collision_->remove(o.object_id);
       if (!attached_hulls_.count(o.mesh.get())) attached_hulls_[o.mesh.get()] = {o.mesh, convex_hull_vertices(o.mesh->vertices)};

@@ -170,6 +170,8 @@ class WorldModel {
   /// After this model's own edit made row `version_id` (a new version of `object_id`, or 0 for a
   /// new object): updates that object alone.
   void apply_edit(ObjectId object_id, ObjectId version_id);
+  /// The hash of a mesh of the scene: an object's already using it, else encoded (and kept) now.
+  std::string mesh_hash(const std::shared_ptr<const TriangleMesh>& mesh);
   void start_environment_job();
   ObjectId edit(ObjectId object_id, const std::string& action, const std::string& author, nlohmann::json changes);
   const SceneObject& object_or_throw(ObjectId object_id) const;
