@@ -165,8 +165,8 @@ TEST(Recognition, PairsOfAmbiguousMatchesFindPipework) {
     "sensors": [{"name": "vivid", "kind": "minolta-vivid-700", "look_at": {"eye": [0, -0.8, 1.6], "target": [0, 0, 0.82]}}],
     "lights": [{"position": [1.0, -1.2, 2.6], "diffuse": [0.85, 0.85, 0.82], "ambient": [0.3, 0.3, 0.3]}]
   })");
-  cell["objects"].push_back({{"name", "pipe_350#1"}, {"mesh", (models / "pipe_350.ply").string()}, {"pose", "-0.05 0.0 0.86 0.3 0.6 0.1 0.73"}, {"drop", true}, {"mass_kg", 1.0}});
-  cell["objects"].push_back({{"name", "elbow_90#1"}, {"mesh", (models / "elbow_90.ply").string()}, {"pose", "0.15 0.1 0.9 0.2 0.1 0.6 0.77"}, {"drop", true}, {"mass_kg", 0.6}});
+  cell["objects"].push_back({{"name", "pipe_350#1"}, {"mesh", (models / "pipe_350.ply").string()}, {"pose", "-0.05 0.0 0.86 0.30107070 0.60214141 0.10035690 0.73260538"}, {"drop", true}, {"mass_kg", 1.0}});
+  cell["objects"].push_back({{"name", "elbow_90#1"}, {"mesh", (models / "elbow_90.ply").string()}, {"pose", "0.15 0.1 0.9 0.19971063 0.09985531 0.59913189 0.76888592"}, {"drop", true}, {"mass_kg", 0.6}});
   std::ofstream(dir / "cell.json") << cell.dump(1);
   sim::Simulator simulator(sim::load_workcell(dir / "cell.json"));
   sim::ScanRequest request;
