@@ -617,8 +617,16 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         if (2 * h.support < h.first_support) h.done = true;
         else starts.push_back({h.T_scene_model, h.support, h.support, &h});
       }
-      std::stable_sort(starts.begin(), starts.end(), [](const Start& a, const Start& b) { return a.support > b.support; });
-      if (starts.size() > static_cast<size_t>(std::max(params.coarse_refined, 0))) starts.resize(static_cast<size_t>(std::max(params.coarse_refined, 0)));
+      // Groups and pair hypotheses are ranked apart: the pairs were chosen for their support and
+      // would crowd out groups whose coarser first pose only the ICP brings onto the surface.
+      const auto by_support = [](const Start& a, const Start& b) { return a.support > b.support; };
+      const auto first_pair = std::partition(starts.begin(), starts.end(), [](const Start& st) { return st.origin == nullptr; });
+      const auto groups_end = std::min(first_pair, starts.begin() + std::max(params.coarse_refined, 0));
+      std::stable_sort(starts.begin(), first_pair, by_support);
+      std::stable_sort(first_pair, starts.end(), by_support);
+      const auto pairs_end = first_pair + std::min<std::ptrdiff_t>(starts.end() - first_pair, std::max(params.coarse_refined, 0));
+      starts.erase(pairs_end, starts.end());
+      starts.erase(groups_end, first_pair);
       std::vector<Verified> verified;
       for (const auto& st : starts) {
         IcpResult r;

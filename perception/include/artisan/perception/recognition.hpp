@@ -104,9 +104,10 @@ struct RecognitionParams {
   int pair_score_points = 200;         ///< [1] model points (evenly subsampled) that score a hypothesis
   double pair_min_support = 0.05;      ///< [1] share of those that must land on the scene surface
   int pair_pool = 200;                 ///< [1] best distinct pair hypotheses kept per model
-  /// [1] starting poses (groups and pair hypotheses) refined by the coarse ICP per instance
-  /// search: those that put the most sampled model points on scene surface not yet explained
-  int coarse_refined = 20;
+  /// [1] starting poses refined by the coarse ICP per instance search, of the groups and of the
+  /// pair hypotheses each: those that put the most sampled model points on scene surface not yet
+  /// explained
+  int coarse_refined = 15;
   double min_model_overlap = 0.15;     ///< [1] share of the model's points that must lie on the scene (less the share occluded)
   double max_rmse_factor = 0.5;        ///< [1] largest accepted residual, in resolutions
   int max_instances = 5;               ///< [1] per model
