@@ -670,6 +670,21 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
             seen.free_space > params.max_free_space_fraction || seen.explained < params.min_visible_explained ||
             seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction)
           continue;
+        // A pose the ICP brought back onto an instance already accepted (from a start on the
+        // surface around it) is that instance again: refused when more than max_shared_support
+        // of the scene surface it lies on is explained already.
+        if (instance > 0) {
+          const Eigen::Isometry3f T = v.T.cast<float>();
+          std::vector<size_t> near;
+          std::vector<char> counted(scene_points.points.size(), 0);
+          size_t on = 0, taken = 0;
+          for (const auto& p : model.points) {
+            scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
+            for (const size_t s : near)
+              if (!counted[s]) counted[s] = 1, ++on, taken += explained[s];
+          }
+          if (static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on)) continue;
+        }
         winner = &v;
         break;
       }

@@ -112,7 +112,9 @@ struct RecognitionParams {
   double max_rmse_factor = 0.5;        ///< [1] largest accepted residual, in resolutions
   int max_instances = 5;               ///< [1] per model
   /// [1] an instance sharing more than this share of the scene surface it explains with an
-  /// instance (of another model) that explains more is dropped
+  /// instance (of another model) that explains more is dropped; a pose of a model on surface an
+  /// accepted instance of the same model explains more than this share of is refused (the same
+  /// instance again)
   double max_shared_support = 0.3;
   double ambiguity_margin = 0.05;      ///< [1] a different pose within this overlap of the best is an ambiguity
   /// Where the sensors that saw the scene were, in the scene frame (one view for a single scan,
@@ -131,7 +133,7 @@ struct RecognitionParams {
   /// With perspective views: the largest share of the explained model surface whose tangent
   /// plane the scene continues beyond the model's outline (no silhouette there: the model's
   /// face lies flush on a larger surface, such as a flange's face on a box's).
-  double max_continued_fraction = 0.05;
+  double max_continued_fraction = 0.03;
   int max_candidates_verified = 5;     ///< [1] poses tried in score order per instance before giving up
   bool keep_candidates = false;        ///< fill RecognitionResult::candidates (diagnosis)
 };
