@@ -244,6 +244,18 @@ int main(int argc, char** argv) {
       else if (k == "resolution_m") library_params.resolution_m = v;
       else if (k == "pca_variance") library_params.pca_variance = v;
       else if (k == "compressed_search") tuned.compressed_search = v != 0;
+      else if (k == "group_hypotheses") tuned.group_hypotheses = v != 0;
+      else if (k == "pair_partners") tuned.pair_partners = int(v);
+      else if (k == "pair_anchors") tuned.pair_anchors = int(v);
+      else if (k == "pair_distance_tolerance_factor") tuned.pair_distance_tolerance_factor = v;
+      else if (k == "pair_angle_tolerance_deg") tuned.pair_angle_tolerance_deg = v;
+      else if (k == "pair_min_distance_factor") tuned.pair_min_distance_factor = v;
+      else if (k == "pair_score_points") tuned.pair_score_points = int(v);
+      else if (k == "pair_min_support") tuned.pair_min_support = v;
+      else if (k == "pair_pool") tuned.pair_pool = int(v);
+      else if (k == "coarse_refined") tuned.coarse_refined = int(v);
+      else if (k == "max_instances") tuned.max_instances = int(v);
+      else if (k == "max_continued_fraction") tuned.max_continued_fraction = v;
       else {
         std::cerr << "bench_recognition: unknown parameter " << k << "\n";
         return 2;
@@ -343,8 +355,8 @@ int main(int argc, char** argv) {
         bool matched = false;
         for (const auto& inst : truth) matched |= inst.model == i.model && symmetric_match(*by_name.at(i.model), inst.T_sensor_object, i.T_scene_model);
         if (matched)
-          std::fprintf(stderr, "  found %s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f\n", i.model.c_str(), i.overlap_fraction,
-                       i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction);
+          std::fprintf(stderr, "  found %s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f\n", i.model.c_str(),
+                       i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction, i.continued_fraction);
         else {
           double nearest = 1e9, angle = 0;
           std::string what = "none";
@@ -353,8 +365,9 @@ int main(int argc, char** argv) {
             if (d < nearest) nearest = d, angle = rotation_angle(inst.T_sensor_object.inverse() * i.T_scene_model) * 180 / std::numbers::pi, what = inst.model;
           }
           std::fprintf(stderr, "  nearest instance %s at %.1f mm, %.1f deg;", what.c_str(), nearest * 1e3, angle);
-          std::fprintf(stderr, "  false %s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f group %zu at %.3f %.3f %.3f\n", i.model.c_str(),
-                       i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction, i.correspondences,
+          std::fprintf(stderr, "  false %s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f group %zu at %.3f %.3f %.3f\n",
+                       i.model.c_str(), i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction,
+                       i.continued_fraction, i.correspondences,
                        i.T_scene_model.translation().x(), i.T_scene_model.translation().y(), i.T_scene_model.translation().z());
         }
       }
@@ -387,13 +400,21 @@ int main(int argc, char** argv) {
         ++diagnosis[stage];
         std::fprintf(stderr, "  missed %s (%.0f%% occluded): %s", inst.model.c_str(), 100 * (1 - inst.visible), stage.c_str());
         if (best)
-          std::fprintf(stderr, " rank %d overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f group %zu", rank_best, best->overlap_fraction,
-                       best->rmse_m * 1e3, best->free_space_fraction, best->visible_explained, best->occluded_fraction, best->correspondences);
+          std::fprintf(stderr, " rank %d overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f group %zu", rank_best,
+                       best->overlap_fraction, best->rmse_m * 1e3, best->free_space_fraction, best->visible_explained, best->occluded_fraction,
+                       best->continued_fraction, best->correspondences);
         std::fprintf(stderr, "\n");
       }
     }
 
-    json scene_j = {{"scene", s}, {"instances", truth.size()}, {"detections", ours.size()}, {"false_positives", fp}, {"seconds", t_ours}};
+    json scene_j = {{"scene", s},
+                    {"instances", truth.size()},
+                    {"detections", ours.size()},
+                    {"false_positives", fp},
+                    {"seconds", t_ours},
+                    {"seconds_spin_images", result.seconds_spin_images},
+                    {"seconds_search", result.seconds_search},
+                    {"seconds_verify", result.seconds_verify}};
     if (with_ppf) {
       // The scene at the detector's own sampling distance (the relative sampling step times the models' mean diameter),
       // as its authors do; every point pair within a model's diameter is voted on.

@@ -3,14 +3,14 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <numbers>
 #include <optional>
+#include <random>
 #include <unordered_map>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <nanoflann.hpp>
 
 #include "artisan/core/error.hpp"
@@ -70,6 +70,7 @@ class FreeSpace {
     double explained = 1;   ///< share of the model surface a sensor should have seen, and nothing hid, that it did see
     double occluded = 0;    ///< share of the model surface a sensor should have seen that something in front hid
     double planarity = 0;   ///< largest eigenvalue of the mean outer product of the explained surface's normals (1: one plane)
+    double continued = 0;   ///< share of the explained surface whose tangent plane the scene carries on beyond the model
   };
   /// The model (its points at T) against what each view saw. A model point faces a view when its
   /// normal points at the sensor; it should have been seen when it faces the view and nothing of
@@ -142,6 +143,33 @@ class FreeSpace {
     if (did) c.planarity = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(normals / static_cast<double>(did)).eigenvalues().maxCoeff();
     if (should > occluded) c.explained = static_cast<double>(did) / static_cast<double>(should - occluded);
     else if (should) c.explained = 0;  // everything it should show is hidden: nothing supports it
+    // Silhouette: where an object's seen surface ends, the scene beyond it steps away or turns
+    // (its own outline against what lies behind). A pose whose explained surface the scene
+    // continues smoothly past the model's outline - a flange's face "found" flush on a box's
+    // face - lies on a larger surface, not on an object of its own. An explained model point is
+    // continued when a scene point within 3 resolutions, off the model (farther than 1.5
+    // resolutions from all its points), lies on its tangent plane (within half a resolution)
+    // with a normal within 25 degrees of its own.
+    if (did) {
+      std::vector<char> on_model(scene_.points.size(), 0);
+      std::vector<size_t> around;
+      for (size_t i = 0; i < p.size(); ++i) {
+        tree_.within(p[i].cast<float>(), static_cast<float>(1.5 * resolution_), around);
+        for (const size_t s : around) on_model[s] = 1;
+      }
+      size_t continued = 0;
+      for (size_t i = 0; i < p.size(); ++i) {
+        if (!expected[i] || !seen_there[i]) continue;
+        const Eigen::Vector3f pi = p[i].cast<float>(), ni = n[i].cast<float>();
+        tree_.within(pi, static_cast<float>(3.0 * resolution_), around);
+        for (const size_t s : around)
+          if (!on_model[s] && std::abs(ni.dot(scene_.points[s] - pi)) <= static_cast<float>(0.5 * resolution_) && ni.dot(scene_.normals[s]) >= 0.9f) {
+            ++continued;
+            break;
+          }
+      }
+      c.continued = static_cast<double>(continued) / static_cast<double>(did);
+    }
     return c;
   }
 
@@ -223,6 +251,129 @@ class FreeSpace {
   std::vector<char> background_;  ///< per scene point: on a background plane
   std::vector<Map> maps_;
 };
+
+// A pose hypothesis from a pair of matches, with its cheap score.
+struct PoseHypothesis {
+  Transform T_scene_model = Transform::Identity();
+  size_t first_support = 0;  ///< sampled model points on the scene surface when made
+  size_t support = 0;        ///< the same, leaving out the surface accepted instances explain
+  bool done = false;         ///< refined and verified (or made redundant): not tried again
+  std::optional<IcpResult> coarse;
+};
+
+// How many of the sampled model points, at T_scene_model, lie on the scene surface (within
+// `within_m` of a scene point whose normal agrees) not explained by an accepted instance.
+size_t surface_support(const PointCloud& model, const std::vector<size_t>& sample, const PointCloud& scene, const KdTree3& scene_tree,
+                       const Transform& T_scene_model, double within_m, const std::vector<char>& explained) {
+  const Eigen::Isometry3f T = T_scene_model.cast<float>();
+  const float within2 = static_cast<float>(within_m * within_m);
+  size_t n = 0;
+  for (const size_t i : sample) {
+    const auto [j, d2] = scene_tree.nearest(T * model.points[i]);
+    n += d2 <= within2 && !explained[j] && (T.linear() * model.normals[i]).dot(scene.normals[j]) >= 0.7f;
+  }
+  return n;
+}
+
+// The rigid transform that maps two oriented model points onto two oriented scene points in the
+// least-squares sense (Umeyama on the points and on points a pair length along each normal).
+Transform pose_from_pairs(const Eigen::Vector3f& m_a, const Eigen::Vector3f& nm_a, const Eigen::Vector3f& m_b, const Eigen::Vector3f& nm_b,
+                          const Eigen::Vector3f& s_a, const Eigen::Vector3f& ns_a, const Eigen::Vector3f& s_b, const Eigen::Vector3f& ns_b, float length) {
+  Eigen::Matrix<double, 3, 4> from, to;
+  from << m_a.cast<double>(), m_b.cast<double>(), (m_a + length * nm_a).cast<double>(), (m_b + length * nm_b).cast<double>();
+  to << s_a.cast<double>(), s_b.cast<double>(), (s_a + length * ns_a).cast<double>(), (s_b + length * ns_b).cast<double>();
+  Transform T = Transform::Identity();
+  T.matrix() = Eigen::umeyama(from, to, false);
+  return T;
+}
+
+// Pose hypotheses of one model from pairs of its matches (RecognitionParams::pair_*): for each
+// anchor scene point (in a fixed pseudo-random order), partner scene points within the model's
+// diameter; every combination of a model match of each whose point-pair features (Drost et al.
+// 2010: the distance, the angle of each normal to the joining line, the angle between the
+// normals) agree gives a pose, scored by surface_support. The best distinct ones, best first.
+std::vector<PoseHypothesis> pair_hypotheses(const PointCloud& model, const std::vector<size_t>& sample, const PointCloud& scene,
+                                            const KdTree3& scene_tree, const std::vector<detail::Correspondence>& matches, double res,
+                                            const RecognitionParams& params) {
+  std::vector<PoseHypothesis> out;
+  if (params.pair_partners <= 0 || matches.empty() || sample.empty()) return out;
+  // The matched model points of each scene point.
+  std::unordered_map<size_t, size_t> anchor_of;
+  std::vector<size_t> anchors;                  // scene point indices
+  std::vector<std::vector<size_t>> model_of;    // per anchor: model point indices
+  for (const auto& c : matches) {
+    auto [it, inserted] = anchor_of.try_emplace(c.target, anchors.size());
+    if (inserted) anchors.push_back(c.target), model_of.emplace_back();
+    model_of[it->second].push_back(c.source);
+  }
+  std::vector<Eigen::Vector3f> anchor_points;
+  for (const size_t a : anchors) anchor_points.push_back(scene.points[a]);
+  const KdTree3 anchor_tree(anchor_points);
+  Eigen::AlignedBox3f box;
+  for (const auto& p : model.points) box.extend(p);
+  const float diameter = box.diagonal().norm();
+  const float min_distance = static_cast<float>(params.pair_min_distance_factor * res);
+  const float tolerance = static_cast<float>(params.pair_distance_tolerance_factor * res);
+  const float angle_tolerance = static_cast<float>(params.pair_angle_tolerance_deg * std::numbers::pi / 180);
+  const size_t min_support = static_cast<size_t>(std::ceil(params.pair_min_support * static_cast<double>(sample.size())));
+  const std::vector<char> nothing_explained(scene.points.size(), 0);
+  const auto angle = [](const Eigen::Vector3f& a, const Eigen::Vector3f& b) { return std::acos(std::clamp(a.dot(b), -1.0f, 1.0f)); };
+
+  std::vector<size_t> order(anchors.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::mt19937 rng(20101);  // fixed: the same scene gives the same hypotheses
+  std::shuffle(order.begin(), order.end(), rng);
+  if (order.size() > static_cast<size_t>(std::max(params.pair_anchors, 0))) order.resize(static_cast<size_t>(std::max(params.pair_anchors, 0)));
+  std::vector<size_t> near;
+  std::vector<PoseHypothesis> made;
+  for (const size_t a : order) {
+    const Eigen::Vector3f& s_a = scene.points[anchors[a]];
+    const Eigen::Vector3f& ns_a = scene.normals[anchors[a]];
+    anchor_tree.within(s_a, diameter, near);
+    std::erase_if(near, [&](size_t b) { return (anchor_points[b] - s_a).norm() < min_distance; });
+    if (near.empty()) continue;
+    for (int t = 0; t < params.pair_partners; ++t) {
+      const size_t b = near[rng() % near.size()];
+      const Eigen::Vector3f& s_b = scene.points[anchors[b]];
+      const Eigen::Vector3f& ns_b = scene.normals[anchors[b]];
+      const Eigen::Vector3f d_s = s_b - s_a;
+      const float l_s = d_s.norm();
+      const Eigen::Vector3f u_s = d_s / l_s;
+      const float f1 = angle(ns_a, u_s), f2 = angle(ns_b, u_s), f3 = angle(ns_a, ns_b);
+      for (const size_t m_a : model_of[a])
+        for (const size_t m_b : model_of[b]) {
+          if (m_a == m_b) continue;
+          const Eigen::Vector3f d_m = model.points[m_b] - model.points[m_a];
+          const float l_m = d_m.norm();
+          if (std::abs(l_m - l_s) > tolerance) continue;
+          const Eigen::Vector3f u_m = d_m / l_m;
+          if (std::abs(angle(model.normals[m_a], u_m) - f1) > angle_tolerance || std::abs(angle(model.normals[m_b], u_m) - f2) > angle_tolerance ||
+              std::abs(angle(model.normals[m_a], model.normals[m_b]) - f3) > angle_tolerance)
+            continue;
+          PoseHypothesis h;
+          h.T_scene_model = pose_from_pairs(model.points[m_a], model.normals[m_a], model.points[m_b], model.normals[m_b], s_a, ns_a, s_b, ns_b, l_s);
+          h.first_support = h.support = surface_support(model, sample, scene, scene_tree, h.T_scene_model, 1.5 * res, nothing_explained);
+          if (h.support >= min_support) made.push_back(std::move(h));
+        }
+    }
+  }
+  // The best distinct hypotheses: one of those that put the model's centre within a tenth of its
+  // diameter and turn it by less than 20 degrees from each other.
+  std::stable_sort(made.begin(), made.end(), [](const PoseHypothesis& x, const PoseHypothesis& y) { return x.support > y.support; });
+  const Eigen::Vector3d centre = box.center().cast<double>();
+  for (auto& h : made) {
+    if (out.size() >= static_cast<size_t>(std::max(params.pair_pool, 0))) break;
+    bool duplicate = false;
+    for (const auto& o : out)
+      if ((h.T_scene_model * centre - o.T_scene_model * centre).norm() < 0.1 * diameter &&
+          rotation_angle(o.T_scene_model.inverse() * h.T_scene_model) < 20.0 * std::numbers::pi / 180) {
+        duplicate = true;
+        break;
+      }
+    if (!duplicate) out.push_back(std::move(h));
+  }
+  return out;
+}
 
 }  // namespace
 
@@ -431,25 +582,80 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     const PointCloud& model = library.model_points(m);
     auto candidates = per_model[m];
     std::vector<char> explained(scene_points.points.size(), 0);
-    if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
-      std::fprintf(stderr, "model %s: %zu model points, %zu correspondences from %zu scene points\n", library.model_name(m).c_str(),
-                   model.points.size(), candidates.size(), basis.size());
-    for (int instance = 0; instance < params.max_instances && candidates.size() >= 3; ++instance) {
-      const auto grouped = detail::group_correspondences(model, scene_points, candidates, grouping);
+    std::vector<size_t> sample;  // the model points that score a pair hypothesis
+    const size_t sample_step = std::max<size_t>(1, model.points.size() / static_cast<size_t>(std::max(params.pair_score_points, 1)));
+    for (size_t i = 0; i < model.points.size(); i += sample_step) sample.push_back(i);
+    auto pool = pair_hypotheses(model, sample, scene_points, scene_tree, candidates, res, params);
+    for (int instance = 0; instance < params.max_instances; ++instance) {
       struct Verified {
         Transform T;
         IcpResult icp;
         double score;
         size_t size;
         std::optional<FreeSpace::Check> seen;  ///< once refined
+        PoseHypothesis* origin = nullptr;      ///< the pair hypothesis it came from
       };
+      // Starting poses: the groups' and the pair hypotheses still open (a pair hypothesis that
+      // lost half its support to the surface accepted instances explain was on such an
+      // instance). All are ranked by their support on the scene surface not yet explained (a
+      // cheap verification), and only the best are refined by the coarse ICP.
+      struct Start {
+        Transform T;
+        size_t size, support;
+        PoseHypothesis* origin;
+      };
+      std::vector<Start> starts;
+      if (params.group_hypotheses && candidates.size() >= 3) {
+        const auto grouped = detail::group_correspondences(model, scene_points, candidates, grouping);
+        for (const auto& g : grouped.groups)
+          starts.push_back({g.T_target_source, g.size,
+                            surface_support(model, sample, scene_points, scene_tree, g.T_target_source, 2.0 * res, explained), nullptr});
+      }
+      for (auto& h : pool) {
+        if (h.done) continue;
+        if (instance > 0) h.support = surface_support(model, sample, scene_points, scene_tree, h.T_scene_model, 1.5 * res, explained);
+        if (2 * h.support < h.first_support) h.done = true;
+        else starts.push_back({h.T_scene_model, h.support, h.support, &h});
+      }
+      // Groups and pair hypotheses are ranked apart: the pairs were chosen for their support and
+      // would crowd out groups whose coarser first pose only the ICP brings onto the surface.
+      const auto by_support = [](const Start& a, const Start& b) { return a.support > b.support; };
+      const auto first_pair = std::partition(starts.begin(), starts.end(), [](const Start& st) { return st.origin == nullptr; });
+      const auto groups_end = std::min(first_pair, starts.begin() + std::max(params.coarse_refined, 0));
+      std::stable_sort(starts.begin(), first_pair, by_support);
+      std::stable_sort(first_pair, starts.end(), by_support);
+      const auto pairs_end = first_pair + std::min<std::ptrdiff_t>(starts.end() - first_pair, std::max(params.coarse_refined, 0));
+      starts.erase(pairs_end, starts.end());
+      starts.erase(groups_end, first_pair);
       std::vector<Verified> verified;
-      for (const auto& g : grouped.groups) {
-        const auto r = icp_point_to_plane(model, scene_points, scene_tree, g.T_target_source, coarse);
-        verified.push_back({r.T_target_source, r, r.overlap_fraction - 0.5 * r.rmse_m / res, g.size, std::nullopt});
+      for (const auto& st : starts) {
+        IcpResult r;
+        if (st.origin) {
+          if (!st.origin->coarse) st.origin->coarse = icp_point_to_plane(model, scene_points, scene_tree, st.T, coarse);
+          r = *st.origin->coarse;
+        } else {
+          r = icp_point_to_plane(model, scene_points, scene_tree, st.T, coarse);
+        }
+        verified.push_back({r.T_target_source, r, r.overlap_fraction - 0.5 * r.rmse_m / res, st.size, std::nullopt, st.origin});
       }
       if (verified.empty()) break;
       std::sort(verified.begin(), verified.end(), [](const Verified& a, const Verified& b) { return a.score > b.score; });
+      // Poses the coarse ICP brought together (within 2 resolutions and 2 degrees of a better
+      // one) are refined once.
+      {
+        std::vector<Verified> distinct;
+        for (auto& v : verified) {
+          bool same = false;
+          for (const auto& d : distinct)
+            if ((d.T.translation() - v.T.translation()).norm() < 2 * res && rotation_angle(d.T.inverse() * v.T) < 2.0 * std::numbers::pi / 180) {
+              same = true;
+              break;
+            }
+          if (same && v.origin) v.origin->done = true;
+          if (!same) distinct.push_back(std::move(v));
+        }
+        verified = std::move(distinct);
+      }
       // In score order, the first pose that passes the fine ICP and the free-space test wins.
       Verified* winner = nullptr;
       for (int tried = 0; tried < std::min<int>(params.max_candidates_verified, static_cast<int>(verified.size())); ++tried) {
@@ -457,16 +663,28 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
         v.T = v.icp.T_target_source;
         const auto& seen = v.seen.emplace(free_space.check(model, v.T));
-        if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
-          std::fprintf(stderr, "  %s try %d: overlap %.3f rmse %.2f mm free space %.3f explained %.3f occluded %.3f planarity %.3f group %zu\n",
-                       library.model_name(m).c_str(), tried, v.icp.overlap_fraction, v.icp.rmse_m * 1e3, seen.free_space, seen.explained,
-                       seen.occluded, seen.planarity, v.size);
+        if (v.origin) v.origin->done = true;
         // What something hid is not held against the overlap either; but what is seen must be
         // more than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
         if (v.icp.overlap_fraction < params.min_model_overlap * (1 - seen.occluded) || v.icp.rmse_m > params.max_rmse_factor * res ||
             seen.free_space > params.max_free_space_fraction || seen.explained < params.min_visible_explained ||
-            seen.planarity > params.max_support_planarity)
+            seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction)
           continue;
+        // A pose the ICP brought back onto an instance already accepted (from a start on the
+        // surface around it) is that instance again: refused when more than max_shared_support
+        // of the scene surface it lies on is explained already.
+        if (instance > 0) {
+          const Eigen::Isometry3f T = v.T.cast<float>();
+          std::vector<size_t> near;
+          std::vector<char> counted(scene_points.points.size(), 0);
+          size_t on = 0, taken = 0;
+          for (const auto& p : model.points) {
+            scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
+            for (const size_t s : near)
+              if (!counted[s]) counted[s] = 1, ++on, taken += explained[s];
+          }
+          if (static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on)) continue;
+        }
         winner = &v;
         break;
       }
@@ -483,6 +701,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
             c.free_space_fraction = v.seen->free_space;
             c.visible_explained = v.seen->explained;
             c.occluded_fraction = v.seen->occluded;
+            c.continued_fraction = v.seen->continued;
           }
           c.stage = &v == winner ? RecognitionCandidate::Stage::accepted
                                  : v.seen ? RecognitionCandidate::Stage::refused : RecognitionCandidate::Stage::coarse;
@@ -502,6 +721,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       found.free_space_fraction = top.seen->free_space;
       found.visible_explained = top.seen->explained;
       found.occluded_fraction = top.seen->occluded;
+      found.continued_fraction = top.seen->continued;
       for (size_t k = 1; k < verified.size(); ++k) {
         const auto& other = verified[k];
         if (other.score < top.score - params.ambiguity_margin) break;
@@ -543,15 +763,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     std::vector<RecognizedInstance> kept;
     for (size_t i = 0; i < keep.size(); ++i)
       if (keep[i]) kept.push_back(std::move(result.instances[i]));
-      else if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
-        std::fprintf(stderr, "  %s dropped: its surface is mostly another instance's\n", result.instances[i].model.c_str());
     result.instances = std::move(kept);
   }
   result.seconds_verify = since(t0);
-  if (std::getenv("ARTISAN_RECOGNITION_DEBUG"))
-    std::fprintf(stderr, "scene %zu points, %zu basis; library %d components; spin images %.2f s, search %.2f s, verify %.2f s\n",
-                 scene_points.points.size(), basis.size(), library.components(), result.seconds_spin_images, result.seconds_search,
-                 result.seconds_verify);
   return result;
 }
 

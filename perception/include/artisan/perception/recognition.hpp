@@ -88,11 +88,33 @@ struct RecognitionParams {
   double geometric_consistency = 0.25; ///< [1] T_gc
   double gamma_factor = 4.0;           ///< [1] grouping gamma, in resolutions
   int max_groups = 30;                 ///< [1] per model and instance search
+  bool group_hypotheses = true;        ///< poses from Johnson & Hebert's grouping (geometric consistency, eq. 9-10)
+  /// Poses from pairs of matches, which tolerate ambiguous spin images (pipes and fittings are
+  /// nearly surfaces of revolution: a scene point's right model point is rarely its nearest
+  /// match, but often among its k nearest). Two scene points and one model match of each whose
+  /// point-pair features agree (distance, and the angles between the normals and the line
+  /// joining the points; Drost et al., "Model Globally, Match Locally", CVPR 2010) fix a pose
+  /// from the two oriented points; each pose is scored by how many sampled model points it puts
+  /// on the scene surface (a cheap verification), and the best distinct ones go on to ICP.
+  int pair_partners = 8;               ///< [1] partner scene points tried per anchor scene point (0: no pair hypotheses)
+  int pair_anchors = 1500;             ///< [1] anchor scene points tried per model, at most
+  double pair_distance_tolerance_factor = 2.0;  ///< [resolutions] |scene distance - model distance| allowed
+  double pair_angle_tolerance_deg = 20.0;       ///< [deg] per point-pair-feature angle
+  double pair_min_distance_factor = 5.0;        ///< [resolutions] closer pairs fix no stable pose
+  int pair_score_points = 200;         ///< [1] model points (evenly subsampled) that score a hypothesis
+  double pair_min_support = 0.05;      ///< [1] share of those that must land on the scene surface
+  int pair_pool = 200;                 ///< [1] best distinct pair hypotheses kept per model
+  /// [1] starting poses refined by the coarse ICP per instance search, of the groups and of the
+  /// pair hypotheses each: those that put the most sampled model points on scene surface not yet
+  /// explained
+  int coarse_refined = 15;
   double min_model_overlap = 0.15;     ///< [1] share of the model's points that must lie on the scene (less the share occluded)
   double max_rmse_factor = 0.5;        ///< [1] largest accepted residual, in resolutions
   int max_instances = 5;               ///< [1] per model
   /// [1] an instance sharing more than this share of the scene surface it explains with an
-  /// instance (of another model) that explains more is dropped
+  /// instance (of another model) that explains more is dropped; a pose of a model on surface an
+  /// accepted instance of the same model explains more than this share of is refused (the same
+  /// instance again)
   double max_shared_support = 0.3;
   double ambiguity_margin = 0.05;      ///< [1] a different pose within this overlap of the best is an ambiguity
   /// Where the sensors that saw the scene were, in the scene frame (one view for a single scan,
@@ -108,6 +130,10 @@ struct RecognitionParams {
   /// largest eigenvalue of their mean outer product, 1 for a plane, must stay below this).
   double max_support_planarity = 0.95;
   double free_space_tolerance_factor = 3.0;  ///< [resolutions] how far in front of the seen surface counts
+  /// With perspective views: the largest share of the explained model surface whose tangent
+  /// plane the scene continues beyond the model's outline (no silhouette there: the model's
+  /// face lies flush on a larger surface, such as a flange's face on a box's).
+  double max_continued_fraction = 0.03;
   int max_candidates_verified = 5;     ///< [1] poses tried in score order per instance before giving up
   bool keep_candidates = false;        ///< fill RecognitionResult::candidates (diagnosis)
 };
@@ -119,10 +145,11 @@ struct RecognizedInstance {
   double overlap_fraction = 0.0;  ///< [1] share of the model's points on the scene surface
   double rmse_m = 0.0;            ///< [m]
   double score = 0.0;             ///< [1] overlap - residual penalty; higher is better
-  size_t correspondences = 0;     ///< in the winning group
+  size_t correspondences = 0;     ///< in the winning group (a pose from a pair of matches: the sampled model points it put on the scene)
   double free_space_fraction = 0.0;  ///< [1] share of the model's sensor-facing surface in seen free space
   double visible_explained = 1.0;    ///< [1] share of the model surface the sensors should have seen, and nothing hid, that they saw
   double occluded_fraction = 0.0;    ///< [1] share of the model surface the sensors should have seen that something hid
+  double continued_fraction = 0.0;   ///< [1] share of the explained surface the scene continues past the model's outline
   bool ambiguous = false;         ///< another pose explains the scene almost as well (symmetry)
   Transform T_scene_model_alternative = Transform::Identity();  ///< that pose, when ambiguous
 };
@@ -131,7 +158,7 @@ struct RecognizedInstance {
 struct RecognitionCandidate {
   size_t model_index = 0;
   Transform T_scene_model = Transform::Identity();
-  double overlap_fraction = 0, rmse_m = 0, free_space_fraction = 0, visible_explained = 1, occluded_fraction = 0;
+  double overlap_fraction = 0, rmse_m = 0, free_space_fraction = 0, visible_explained = 1, occluded_fraction = 0, continued_fraction = 0;
   size_t correspondences = 0;
   enum class Stage { coarse, refused, accepted } stage = Stage::coarse;  ///< coarse: never refined
 };
@@ -149,8 +176,7 @@ struct RecognitionResult {
   double seconds_spin_images = 0.0, seconds_search = 0.0, seconds_verify = 0.0;
 };
 
-/// Finds every instance of the library's models in `scene`. A scene with none gives none. With
-/// ARTISAN_RECOGNITION_DEBUG set, prints each model's matches and every pose tried (stderr).
+/// Finds every instance of the library's models in `scene`. A scene with none gives none.
 RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library, const RecognitionParams& params = {});
 
 }  // namespace artisan
