@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <numbers>
@@ -36,6 +37,28 @@ SpinImageLibrary& bunny_library() {
     return lib;
   }();
   return library;
+}
+
+// One simulated Vivid view, from the front and above, of a table (on a floor) with `extra`
+// boxes of structure and `objects` dropped on it (workcell JSON entries).
+sim::Acquisition scan_table(const std::filesystem::path& dir, int seed, const nlohmann::json& extra, const nlohmann::json& objects) {
+  nlohmann::json cell = nlohmann::json::parse(R"({
+    "name": "table", "start_time_s": 946684800,
+    "structure": [
+      {"name": "floor", "primitive": {"box": [4, 4, 0.02]}, "pose": "0 0 -0.01 0 0 0 1"},
+      {"name": "table_top", "primitive": {"box": [0.8, 0.6, 0.04]}, "pose": "0 0 0.78 0 0 0 1"}
+    ],
+    "sensors": [{"name": "vivid", "kind": "minolta-vivid-700", "look_at": {"eye": [0, -0.8, 1.6], "target": [0, 0, 0.82]}}],
+    "lights": [{"position": [1.0, -1.2, 2.6], "diffuse": [0.85, 0.85, 0.82], "ambient": [0.3, 0.3, 0.3]}]
+  })");
+  cell["seed"] = seed;
+  for (const auto& e : extra) cell["structure"].push_back(e);
+  cell["objects"] = objects;
+  std::ofstream(dir / "cell.json") << cell.dump(1);
+  sim::Simulator simulator(sim::load_workcell(dir / "cell.json"));
+  sim::ScanRequest request;
+  request.sensor = "vivid";
+  return simulator.scan(request);
 }
 
 TriangleMesh scan_mesh(const std::string& name) {
@@ -100,23 +123,10 @@ TEST(Recognition, CompressedSearchAgreesWithTheFullSearch) {
 TEST(Recognition, AnInstanceHalfHiddenBehindAnotherObjectIsFound) {
   const test::TempDir dir;
   const auto models = test::data_dir() / "workcells" / "models";
-  nlohmann::json cell = nlohmann::json::parse(R"({
-    "name": "occluded", "seed": 3, "start_time_s": 946684800,
-    "structure": [
-      {"name": "floor", "primitive": {"box": [4, 4, 0.02]}, "pose": "0 0 -0.01 0 0 0 1"},
-      {"name": "table_top", "primitive": {"box": [0.8, 0.6, 0.04]}, "pose": "0 0 0.78 0 0 0 1"},
-      {"name": "wall", "primitive": {"box": [0.3, 0.03, 0.12]}, "pose": "0 -0.1 0.86 0 0 0 1"}
-    ],
-    "objects": [],
-    "sensors": [{"name": "vivid", "kind": "minolta-vivid-700", "look_at": {"eye": [0, -0.8, 1.6], "target": [0, 0, 0.82]}}],
-    "lights": [{"position": [1.0, -1.2, 2.6], "diffuse": [0.85, 0.85, 0.82], "ambient": [0.3, 0.3, 0.3]}]
-  })");
-  cell["objects"].push_back({{"name", "tee#1"}, {"mesh", (models / "tee.ply").string()}, {"pose", "0 0.02 0.9 0.5 0.5 0.5 0.5"}, {"drop", true}, {"mass_kg", 1.0}});
-  std::ofstream(dir / "cell.json") << cell.dump(1);
-  sim::Simulator simulator(sim::load_workcell(dir / "cell.json"));
-  sim::ScanRequest request;
-  request.sensor = "vivid";
-  const auto acquisition = simulator.scan(request);
+  const auto wall = nlohmann::json::parse(R"([{"name": "wall", "primitive": {"box": [0.3, 0.03, 0.12]}, "pose": "0 -0.1 0.86 0 0 0 1"}])");
+  const auto objects = nlohmann::json::array({
+      {{"name", "tee#1"}, {"mesh", (models / "tee.ply").string()}, {"pose", "0 0.02 0.9 0.5 0.5 0.5 0.5"}, {"drop", true}, {"mass_kg", 1.0}}});
+  const auto acquisition = scan_table(dir.path(), 3, wall, objects);
   const auto& truth = *std::find_if(acquisition.truth.objects.begin(), acquisition.truth.objects.end(),
                                     [](const auto& o) { return o.name == "tee#1"; });
   const double occlusion = 1 - truth.visible_fraction;
@@ -158,23 +168,10 @@ TEST(Recognition, AnInstanceHalfHiddenBehindAnotherObjectIsFound) {
 TEST(Recognition, PairsOfAmbiguousMatchesFindPipework) {
   const test::TempDir dir;
   const auto models = test::data_dir() / "workcells" / "models";
-  nlohmann::json cell = nlohmann::json::parse(R"({
-    "name": "pipes", "seed": 5, "start_time_s": 946684800,
-    "structure": [
-      {"name": "floor", "primitive": {"box": [4, 4, 0.02]}, "pose": "0 0 -0.01 0 0 0 1"},
-      {"name": "table_top", "primitive": {"box": [0.8, 0.6, 0.04]}, "pose": "0 0 0.78 0 0 0 1"}
-    ],
-    "objects": [],
-    "sensors": [{"name": "vivid", "kind": "minolta-vivid-700", "look_at": {"eye": [0, -0.8, 1.6], "target": [0, 0, 0.82]}}],
-    "lights": [{"position": [1.0, -1.2, 2.6], "diffuse": [0.85, 0.85, 0.82], "ambient": [0.3, 0.3, 0.3]}]
-  })");
-  cell["objects"].push_back({{"name", "pipe_350#1"}, {"mesh", (models / "pipe_350.ply").string()}, {"pose", "-0.05 0.0 0.86 0.30107070 0.60214141 0.10035690 0.73260538"}, {"drop", true}, {"mass_kg", 1.0}});
-  cell["objects"].push_back({{"name", "elbow_90#1"}, {"mesh", (models / "elbow_90.ply").string()}, {"pose", "0.15 0.1 0.9 0.19971063 0.09985531 0.59913189 0.76888592"}, {"drop", true}, {"mass_kg", 0.6}});
-  std::ofstream(dir / "cell.json") << cell.dump(1);
-  sim::Simulator simulator(sim::load_workcell(dir / "cell.json"));
-  sim::ScanRequest request;
-  request.sensor = "vivid";
-  const auto acquisition = simulator.scan(request);
+  const auto objects = nlohmann::json::array({
+      {{"name", "pipe_350#1"}, {"mesh", (models / "pipe_350.ply").string()}, {"pose", "-0.05 0.0 0.86 0.30107070 0.60214141 0.10035690 0.73260538"}, {"drop", true}, {"mass_kg", 1.0}},
+      {{"name", "elbow_90#1"}, {"mesh", (models / "elbow_90.ply").string()}, {"pose", "0.15 0.1 0.9 0.19971063 0.09985531 0.59913189 0.76888592"}, {"drop", true}, {"mass_kg", 0.6}}});
+  const auto acquisition = scan_table(dir.path(), 5, nlohmann::json::array(), objects);
 
   SpinImageLibrary library;
   std::map<std::string, PointCloud> surfaces;

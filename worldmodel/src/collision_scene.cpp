@@ -186,6 +186,9 @@ struct Posed {
   // with the last vertex), so that the support along a triangle's normal is a few vector steps.
   std::vector<f4> hx, hy, hz;
   double rounding = 0;
+  /// Hulls: also prune along each triangle's normal by the vertices (for a box, the oriented-box
+  /// test already holds that axis exactly).
+  bool prune_by_plane = false;
 };
 
 Posed pose_probe(const Probe& p, const Transform& T_body_shape) {
@@ -203,6 +206,7 @@ Posed pose_probe(const Probe& p, const Transform& T_body_shape) {
     // is long and turned (an arm's link lying across the floor).
     const auto& v = *p.vertices;
     q.rounding = p.rounding;
+    q.prune_by_plane = !p.is_box;
     const size_t groups = (v.size() + kHullLanes - 1) / kHullLanes;
     q.hx.resize(groups);
     q.hy.resize(groups);
@@ -299,25 +303,36 @@ float triangle_bound(const Posed& q, const Geometry::Tri& t) {
   return gap;
 }
 
-// Closest point on triangle abc to p (Ericson 5.1.5).
-Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+// Barycentric weights (of a, b, c) of the point of triangle abc closest to p, by its Voronoi
+// regions (Ericson, Real-Time Collision Detection 5.1.5): a vertex or edge region leaves the other
+// weights zero.
+Eigen::Vector3d closest_weights(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
   const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
   const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return a;
+  if (d1 <= 0 && d2 <= 0) return {1, 0, 0};
   const Eigen::Vector3d bp = p - b;
   const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return b;
+  if (d3 >= 0 && d4 <= d3) return {0, 1, 0};
   const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const double t = d1 / (d1 - d3);
+    return {1 - t, t, 0};
+  }
   const Eigen::Vector3d cp = p - c;
   const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return c;
+  if (d6 >= 0 && d5 <= d6) return {0, 0, 1};
   const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const double t = d2 / (d2 - d6);
+    return {1 - t, 0, t};
+  }
   const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-  const double denom = 1.0 / (va + vb + vc);
-  return a + ab * (vb * denom) + ac * (vc * denom);
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return {0, 1 - t, t};
+  }
+  const double denom = 1.0 / (va + vb + vc), v = vb * denom, w = vc * denom;
+  return {1 - v - w, v, w};
 }
 
 // Signed surface distance between the probe and one triangle, with witnesses in the body frame.
@@ -356,43 +371,22 @@ struct Simplex {
     w.fill(Eigen::Vector3d::Zero());
     a = b = w;
   }
-  void keep(const Simplex& from, std::initializer_list<std::pair<int, double>> points) {
-    n = 0;
-    for (const auto& [i, lambda] : points) {
-      w[size_t(n)] = from.w[size_t(i)], a[size_t(n)] = from.a[size_t(i)], b[size_t(n)] = from.b[size_t(i)];
-      weight[size_t(n++)] = lambda;
-    }
+  /// Adds point i of `from` with weight lambda.
+  void take(const Simplex& from, int i, double lambda) {
+    w[size_t(n)] = from.w[size_t(i)], a[size_t(n)] = from.a[size_t(i)], b[size_t(n)] = from.b[size_t(i)];
+    weight[size_t(n++)] = lambda;
   }
 };
 
-// The point of triangle (i, j, k) of `s` nearest the origin, by Ericson's closest-point regions
-// (Real-Time Collision Detection 5.1.5); `out` gets the smallest sub-simplex that holds it.
+// The point of triangle (i, j, k) of `s` nearest the origin; `out` gets the smallest sub-simplex
+// that holds it (the points of non-zero weight).
 Eigen::Vector3d nearest_on_triangle(const Simplex& s, int i, int j, int k, Simplex& out) {
-  const Eigen::Vector3d &a = s.w[size_t(i)], &b = s.w[size_t(j)], &c = s.w[size_t(k)];
-  const Eigen::Vector3d ab = b - a, ac = c - a;
-  const double d1 = -ab.dot(a), d2 = -ac.dot(a);
-  if (d1 <= 0 && d2 <= 0) return out.keep(s, {{i, 1.0}}), a;
-  const double d3 = -ab.dot(b), d4 = -ac.dot(b);
-  if (d3 >= 0 && d4 <= d3) return out.keep(s, {{j, 1.0}}), b;
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
-    const double t = d1 / (d1 - d3);
-    return out.keep(s, {{i, 1 - t}, {j, t}}), a + ab * t;
-  }
-  const double d5 = -ab.dot(c), d6 = -ac.dot(c);
-  if (d6 >= 0 && d5 <= d6) return out.keep(s, {{k, 1.0}}), c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
-    const double t = d2 / (d2 - d6);
-    return out.keep(s, {{i, 1 - t}, {k, t}}), a + ac * t;
-  }
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-    const double t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    return out.keep(s, {{j, 1 - t}, {k, t}}), b + (c - b) * t;
-  }
-  const double denom = 1.0 / (va + vb + vc), v = vb * denom, w = vc * denom;
-  return out.keep(s, {{i, 1 - v - w}, {j, v}, {k, w}}), a + ab * v + ac * w;
+  const Eigen::Vector3d l = closest_weights(Eigen::Vector3d::Zero(), s.w[size_t(i)], s.w[size_t(j)], s.w[size_t(k)]);
+  out.n = 0;
+  const int index[3] = {i, j, k};
+  for (int m = 0; m < 3; ++m)
+    if (l[m] > 0) out.take(s, index[m], l[m]);
+  return l[0] * s.w[size_t(i)] + l[1] * s.w[size_t(j)] + l[2] * s.w[size_t(k)];
 }
 
 // The point of the simplex nearest the origin; the simplex is reduced to the smallest
@@ -407,9 +401,10 @@ bool nearest_on_simplex(Simplex& s, Eigen::Vector3d& v) {
     case 2: {
       const Eigen::Vector3d ab = s.w[1] - s.w[0];
       const double t = -s.w[0].dot(ab), den = ab.squaredNorm();
-      if (t <= 0) out.keep(s, {{0, 1.0}}), v = s.w[0];
-      else if (t >= den) out.keep(s, {{1, 1.0}}), v = s.w[1];
-      else out.keep(s, {{0, 1 - t / den}, {1, t / den}}), v = s.w[0] + ab * (t / den);
+      const double u = den > 0 ? std::clamp(t / den, 0.0, 1.0) : 0.0;
+      if (u < 1) out.take(s, 0, 1 - u);
+      if (u > 0) out.take(s, 1, u);
+      v = s.w[0] + ab * u;
       break;
     }
     case 3: v = nearest_on_triangle(s, 0, 1, 2, out); break;
@@ -500,7 +495,8 @@ GjkOutcome hull_triangle(Posed& q, const Geometry::Tri& t, double reach, Hit& hi
 std::optional<Hit> narrow(const Probe& p, Posed& q, const Geometry::Tri& t, double reach) {
   if (p.is_sphere) {
     const Eigen::Vector3d a = t.a.cast<double>(), b = t.b.cast<double>(), c = t.c.cast<double>();
-    const Eigen::Vector3d on = closest_on_triangle(q.sphere_center, a, b, c);
+    const Eigen::Vector3d l = closest_weights(q.sphere_center, a, b, c);
+    const Eigen::Vector3d on = l[0] * a + l[1] * b + l[2] * c;
     const Eigen::Vector3d d = q.sphere_center - on;
     const double centre = d.norm();
     if (centre - p.radius > reach) return std::nullopt;
@@ -557,7 +553,7 @@ void traverse(const Geometry& g, Posed& q, bool nearest_first, Reach&& reach, Vi
       for (int i = node.index; i < node.index + node.count; ++i) {
         const auto& t = g.tris[size_t(i)];
         if (triangle_bound(q, t) > reach()) continue;
-        if (!q.hx.empty() && hull_plane_gap(q, t.a, t.b, t.c) > reach()) continue;
+        if (q.prune_by_plane && hull_plane_gap(q, t.a, t.b, t.c) > reach()) continue;
         if (!visit(t)) return;
       }
       continue;
