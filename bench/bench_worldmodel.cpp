@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "artisan/core/io/mesh_io.hpp"
+#include "artisan/core/scheduling.hpp"
 #include "artisan/sim/workcell.hpp"
 #include "artisan/teleop_bridge/client.hpp"
 #include "artisan/teleop_bridge/service.hpp"
@@ -53,7 +54,22 @@ TriangleMesh environment_mesh() {
 
 }  // namespace
 
-int main() {
+int main(int argc, char** argv) {
+  // --changes N: operator changes timed through the service; --realtime P: the service's thread
+  // under SCHED_FIFO at priority P with memory locked (artisand --realtime P); --lcm-only: skip
+  // the collision scene's own benchmarks.
+  int n_changes = 300, realtime_priority = 0;
+  bool lcm_only = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--changes" && i + 1 < argc) n_changes = std::stoi(argv[++i]);
+    else if (a == "--realtime" && i + 1 < argc) realtime_priority = std::stoi(argv[++i]);
+    else if (a == "--lcm-only") lcm_only = true;
+    else {
+      std::cerr << "bench_worldmodel: unknown argument '" << a << "' (expected --changes N, --realtime P, --lcm-only)\n";
+      return 2;
+    }
+  }
   const std::string data = ARTISAN_DATA_DIR;
   json out;
   const auto bunny = io::read_mesh(data + "/stanford-bunny/reconstruction/bun_zipper.ply");
@@ -89,85 +105,87 @@ int main() {
                       Eigen::AngleAxisd(ua(rng), Eigen::Vector3d(ux(rng), ux(rng), 1).normalized());
     return g;
   };
-  std::vector<double> check_s, distance_s;
-  int collisions = 0;
-  for (int i = 0; i < 2000; ++i) {
-    const auto g = gripper_at_random();
-    auto t = Clock::now();
-    collisions += scene.check({g}).in_collision;
-    check_s.push_back(seconds_since(t));
-    t = Clock::now();
-    scene.distance({g}, 0.2);
-    distance_s.push_back(seconds_since(t));
-  }
-  out["gripper"] = {{"collision", latency(check_s)}, {"distance_0.2m", latency(distance_s)}, {"in_collision_fraction", collisions / 2000.0}};
-
-  // Sustained collision queries per second, one core.
-  // (its own random numbers, so the arm's configurations below do not depend on the timing)
-  const auto rng_state = rng;
-  t0 = Clock::now();
-  int queries = 0;
-  while (seconds_since(t0) < 2.0) {
-    scene.check({gripper_at_random()});
-    ++queries;
-  }
-  out["gripper"]["queries_per_s"] = queries / seconds_since(t0);
-  rng = rng_state;
-
-  // Ray casts straight down onto the scene.
-  std::vector<double> ray_s;
-  for (int i = 0; i < 2000; ++i) {
-    const Eigen::Vector3d o(ux(rng), ux(rng), 0.5);
-    const auto t = Clock::now();
-    scene.raycast(o, {0, 0, -1}, 2.0);
-    ray_s.push_back(seconds_since(t));
-  }
-  out["raycast"] = latency(ray_s);
-
-  // The UR5: convex hulls of its collision meshes at random joint values within limits.
-  auto cell = sim::load_workcell(data + "/workcells/pipework.json");
-  auto& robot = cell.robot("ur5");
-  std::vector<const sim::Body*> links;
-  for (const auto& b : cell.bodies)
-    if (b.role == sim::BodyRole::robot_link && b.robot == "ur5") links.push_back(&b);
-  const Transform T_world_root = Transform(Eigen::Translation3d(0, 0, 0.02));
-  std::vector<double> arm_s, arm_any_s, arm_distance_s;
-  int arm_collisions = 0, arm_disagree = 0;
-  size_t hull_points = 0;
-  for (int i = 0; i < 1000; ++i) {
-    for (auto& j : robot.joints)
-      if (j.type == sim::JointSpec::Type::revolute)
-        robot.joint_values[j.name] = std::uniform_real_distribution<double>(std::max(j.lower, -M_PI), std::min(j.upper, M_PI))(rng);
-    const auto link_poses = robot.link_poses();
-    std::vector<worldmodel::QueryShape> shapes;
-    for (const auto* b : links) {
-      worldmodel::QueryShape s;
-      s.name = b->link;
-      s.kind = worldmodel::QueryShape::Kind::convex_hull;
-      s.points = b->mesh.vertices;
-      s.T_world_shape = T_world_root * robot.T_world_root.inverse() * link_poses.at(b->link) * b->T_link_body;
-      hull_points += s.points.size();
-      shapes.push_back(std::move(s));
+  if (!lcm_only) {
+    std::vector<double> check_s, distance_s;
+    int collisions = 0;
+    for (int i = 0; i < 2000; ++i) {
+      const auto g = gripper_at_random();
+      auto t = Clock::now();
+      collisions += scene.check({g}).in_collision;
+      check_s.push_back(seconds_since(t));
+      t = Clock::now();
+      scene.distance({g}, 0.2);
+      distance_s.push_back(seconds_since(t));
     }
-    // The base stands on the floor: that contact is allowed.
-    const std::vector<worldmodel::AllowedPair> allowed = {{"base_link", 0}, {"shoulder_link", 0}};
-    auto t = Clock::now();
-    const bool hit = scene.check(shapes, allowed).in_collision;
-    arm_s.push_back(seconds_since(t));
-    arm_collisions += hit;
-    // A planner's boolean check: stop at the first colliding link.
-    t = Clock::now();
-    const bool any = scene.check(shapes, allowed, {.deepest_contacts = false, .stop_at_first = true}).in_collision;
-    arm_any_s.push_back(seconds_since(t));
-    if (any != hit) ++arm_disagree;
-    t = Clock::now();
-    scene.distance(shapes, 0.2, allowed);
-    arm_distance_s.push_back(seconds_since(t));
+    out["gripper"] = {{"collision", latency(check_s)}, {"distance_0.2m", latency(distance_s)}, {"in_collision_fraction", collisions / 2000.0}};
+
+    // Sustained collision queries per second, one core.
+    // (its own random numbers, so the arm's configurations below do not depend on the timing)
+    const auto rng_state = rng;
+    t0 = Clock::now();
+    int queries = 0;
+    while (seconds_since(t0) < 2.0) {
+      scene.check({gripper_at_random()});
+      ++queries;
+    }
+    out["gripper"]["queries_per_s"] = queries / seconds_since(t0);
+    rng = rng_state;
+
+    // Ray casts straight down onto the scene.
+    std::vector<double> ray_s;
+    for (int i = 0; i < 2000; ++i) {
+      const Eigen::Vector3d o(ux(rng), ux(rng), 0.5);
+      const auto t = Clock::now();
+      scene.raycast(o, {0, 0, -1}, 2.0);
+      ray_s.push_back(seconds_since(t));
+    }
+    out["raycast"] = latency(ray_s);
+
+    // The UR5: convex hulls of its collision meshes at random joint values within limits.
+    auto cell = sim::load_workcell(data + "/workcells/pipework.json");
+    auto& robot = cell.robot("ur5");
+    std::vector<const sim::Body*> links;
+    for (const auto& b : cell.bodies)
+      if (b.role == sim::BodyRole::robot_link && b.robot == "ur5") links.push_back(&b);
+    const Transform T_world_root = Transform(Eigen::Translation3d(0, 0, 0.02));
+    std::vector<double> arm_s, arm_any_s, arm_distance_s;
+    int arm_collisions = 0, arm_disagree = 0;
+    size_t hull_points = 0;
+    for (int i = 0; i < 1000; ++i) {
+      for (auto& j : robot.joints)
+        if (j.type == sim::JointSpec::Type::revolute)
+          robot.joint_values[j.name] = std::uniform_real_distribution<double>(std::max(j.lower, -M_PI), std::min(j.upper, M_PI))(rng);
+      const auto link_poses = robot.link_poses();
+      std::vector<worldmodel::QueryShape> shapes;
+      for (const auto* b : links) {
+        worldmodel::QueryShape s;
+        s.name = b->link;
+        s.kind = worldmodel::QueryShape::Kind::convex_hull;
+        s.points = b->mesh.vertices;
+        s.T_world_shape = T_world_root * robot.T_world_root.inverse() * link_poses.at(b->link) * b->T_link_body;
+        hull_points += s.points.size();
+        shapes.push_back(std::move(s));
+      }
+      // The base stands on the floor: that contact is allowed.
+      const std::vector<worldmodel::AllowedPair> allowed = {{"base_link", 0}, {"shoulder_link", 0}};
+      auto t = Clock::now();
+      const bool hit = scene.check(shapes, allowed).in_collision;
+      arm_s.push_back(seconds_since(t));
+      arm_collisions += hit;
+      // A planner's boolean check: stop at the first colliding link.
+      t = Clock::now();
+      const bool any = scene.check(shapes, allowed, {.deepest_contacts = false, .stop_at_first = true}).in_collision;
+      arm_any_s.push_back(seconds_since(t));
+      if (any != hit) ++arm_disagree;
+      t = Clock::now();
+      scene.distance(shapes, 0.2, allowed);
+      arm_distance_s.push_back(seconds_since(t));
+    }
+    out["arm"] = {{"robot", "ur5"}, {"links", links.size()}, {"hull_points_per_link", hull_points / 1000 / std::max<size_t>(1, links.size())},
+                  {"collision", latency(arm_s)}, {"collision_stop_at_first", latency(arm_any_s)},
+                  {"distance_0.2m", latency(arm_distance_s)}, {"in_collision_fraction", arm_collisions / 1000.0},
+                  {"stop_at_first_disagreements", arm_disagree}};
   }
-  out["arm"] = {{"robot", "ur5"}, {"links", links.size()}, {"hull_points_per_link", hull_points / 1000 / std::max<size_t>(1, links.size())},
-                {"collision", latency(arm_s)}, {"collision_stop_at_first", latency(arm_any_s)},
-                {"distance_0.2m", latency(arm_distance_s)}, {"in_collision_fraction", arm_collisions / 1000.0},
-                {"stop_at_first_disagreements", arm_disagree}};
 
   // --- through the service over LCM (memq://) -----------------------------------------------
   const auto dir = std::filesystem::temp_directory_path() / ("artisan-bench-wm-" + std::to_string(::getpid()));
@@ -195,6 +213,7 @@ int main() {
       }
     });
     lcm::LCM lcm("memq://");
+    if (realtime_priority) run_in_realtime(realtime_priority);
     t0 = Clock::now();
     teleop::ServiceOptions options;
     options.folder = "/cell";
@@ -227,14 +246,14 @@ int main() {
     // An operator moves an object: time until another client has the diff.
     std::vector<double> change_s, environment_s;
     const auto first = client.objects().rbegin()->first;
-    // 30 changes; after every 10th the client also waits for the environment's re-cut (the
-    // other changes land while a re-cut runs in the background, as they would in use).
-    for (int i = 0; i < 30; ++i) {
+    // After every 10th change the client also waits for the environment's re-cut (the other
+    // changes land while a re-cut runs in the background, as they would in use).
+    for (int i = 0; i < n_changes; ++i) {
       artisan::command_t c;
       c.type = artisan::command_t::CORRECT_POSE;
       c.author = "bench";
       c.object_id = first;
-      const Transform T = Transform(Eigen::Translation3d(0.002 * i, 0, 0)) * poses.back();
+      const Transform T = Transform(Eigen::Translation3d(0.002 * (i % 30), 0, 0)) * poses.back();
       const Eigen::Quaterniond qr(T.rotation());
       for (int k = 0; k < 3; ++k) c.pose.position[k] = T.translation()[k];
       c.pose.quaternion_xyzw[0] = qr.x(), c.pose.quaternion_xyzw[1] = qr.y(), c.pose.quaternion_xyzw[2] = qr.z(), c.pose.quaternion_xyzw[3] = qr.w();
@@ -249,7 +268,8 @@ int main() {
     }
     out["lcm_memq"] = {{"service_start_s", start_s}, {"late_join_with_meshes_s", join_s}, {"scene_complete", got},
                        {"meshes_fetched", client.meshes_fetched()}, {"query_round_trip", latency(rtt)},
-                       {"change_to_client", latency(change_s)}, {"environment_recut_to_client", latency(environment_s)}};
+                       {"realtime_priority", realtime_priority}, {"change_to_client", latency(change_s)},
+                       {"changes_over_5ms", std::count_if(change_s.begin(), change_s.end(), [](double x) { return x > 5e-3; })}, {"environment_recut_to_client", latency(environment_s)}};
   }
   std::filesystem::remove_all(dir);
   out["goals"] = {{"collision_p99_ms", 1.0}, {"change_to_client_ms", 5.0}};

@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 
 #include "artisan/core/error.hpp"
+#include "artisan/core/scheduling.hpp"
 #include "artisan/teleop_bridge/channels.hpp"
 #include "artisan/teleop_bridge/service.hpp"
 
@@ -21,6 +22,7 @@ int main(int argc, char** argv) {
   std::string db = "artisan.db", url = artisan::teleop::kDefaultLcmUrl;
   artisan::teleop::ServiceOptions options;
   bool quiet = false;
+  int realtime_priority = 0;
   app.add_option("--db", db, "Workspace file")->envname("ARTISAN_DB")->capture_default_str();
   app.add_option("--folder", options.folder, "Workcell folder to serve")->capture_default_str();
   app.add_option("--lcm-url", url, "LCM URL")->envname("LCM_DEFAULT_URL")->capture_default_str();
@@ -28,6 +30,10 @@ int main(int argc, char** argv) {
   app.add_option("--poll-period", options.poll_period_s, "Seconds between looks for workspace changes")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--margin", options.world.object_margin_m, "Collision margin of recognized objects [m]")->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_option("--cutout", options.world.cutout_distance_m, "Environment within this of an object is its surface [m]")->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--realtime", realtime_priority,
+                 "Serve under SCHED_FIFO at this priority (1-99) with memory locked, so that no ordinary thread, the kernel's "
+                 "included, delays an answer (needs root or CAP_SYS_NICE and CAP_IPC_LOCK)")
+      ->check(CLI::Range(1, 99));
   app.add_flag("-q,--quiet", quiet, "No messages on stderr");
   try {
     app.parse(argc, argv);
@@ -37,6 +43,7 @@ int main(int argc, char** argv) {
   }
   try {
     if (!std::filesystem::exists(db)) throw artisan::Error("no workspace at " + db + " (create one with `artisan init`)");
+    if (realtime_priority) artisan::run_in_realtime(realtime_priority);
     auto ws = artisan::worldmodel::Workspace::open(db);
     lcm::LCM lcm(url);
     if (!lcm.good()) throw artisan::Error("cannot open LCM at " + url);

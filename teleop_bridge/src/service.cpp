@@ -55,6 +55,7 @@ struct Service::Impl {
 
   Impl(worldmodel::Workspace& w, lcm::LCM& l, ServiceOptions o) : ws(w), lcm(l), options(std::move(o)), world(ws, options.folder, options.world) {
     if (!lcm.good()) throw Error("LCM is not available (bad URL or no network)");
+    ws.maintain_in_background();  // an edit's commit never waits for a checkpoint's fsync
     if (options.service_id.empty()) options.service_id = "artisand-" + std::to_string(::getpid());
   }
 

@@ -162,8 +162,11 @@ TEST(Artisand, AcrossProcessesInAPrivateNetworkNamespace) {
     stop(player);
   }
 
-  // Restart: the same state from the workspace.
-  service = spawn({artisand, "--db", db, "--folder", "/cell", "--lcm-url", kUrl, "--snapshot-period", "0.5"});
+  // Restart: the same state from the workspace (in real time, as a robot cell would run it,
+  // when this process may: the namespace test runs as root).
+  std::vector<std::string> restart = {artisand, "--db", db, "--folder", "/cell", "--lcm-url", kUrl, "--snapshot-period", "0.5"};
+  if (::geteuid() == 0) restart.insert(restart.end(), {"--realtime", "10"});
+  service = spawn(restart);
   {
     SceneClient again(lcm, "after-restart");
     ASSERT_TRUE(again.wait_for_scene(20));
@@ -175,6 +178,9 @@ TEST(Artisand, AcrossProcessesInAPrivateNetworkNamespace) {
   // Bad input: no workspace, no folder.
   EXPECT_EQ(test::run_command(artisand + " --db " + (dir / "missing.db").string() + " --lcm-url '" + kUrl + "'").exit_code, 1);
   EXPECT_EQ(test::run_command(artisand + " --db " + db + " --folder /nowhere --lcm-url '" + kUrl + "'").exit_code, 1);
+  const auto bad_priority = test::run_command(artisand + " --db " + db + " --realtime 100 --lcm-url '" + kUrl + "'");
+  EXPECT_EQ(bad_priority.exit_code, 2);
+  EXPECT_NE(bad_priority.err.find("--realtime"), std::string::npos) << bad_priority.err;
 }
 
 }  // namespace

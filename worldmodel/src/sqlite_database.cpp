@@ -1,10 +1,13 @@
 #include <sqlite3.h>
 
 #include <chrono>
+#include <condition_variable>
+#include <mutex>
 #include <thread>
 #include <unordered_map>
 
 #include "artisan/core/error.hpp"
+#include "artisan/core/scheduling.hpp"
 #include "artisan/worldmodel/database.hpp"
 
 namespace artisan::worldmodel {
@@ -35,6 +38,14 @@ class SqliteDatabase final : public Database {
     }
   }
   ~SqliteDatabase() override {
+    if (checkpointer_.joinable()) {
+      {
+        std::lock_guard lock(checkpoint_mutex_);
+        stop_ = true;
+      }
+      checkpoint_wanted_.notify_one();
+      checkpointer_.join();
+    }
     for (auto& [sql, stmt] : statements_) sqlite3_finalize(stmt);
     sqlite3_close(db_);
   }
@@ -137,6 +148,51 @@ class SqliteDatabase final : public Database {
 
   std::string description() const override { return "sqlite:" + path_.string(); }
 
+  // SQLite's own checkpoint runs inside the commit that fills the log past 1000 pages, and
+  // fsyncs the log and the database: milliseconds, up to tens of them on a busy disk, in the
+  // middle of an edit. Here the commit only signals (the WAL hook replaces the automatic
+  // checkpoint), and a thread with a connection of its own makes a passive checkpoint, which
+  // never blocks the writer: it copies what no reader still needs, and the next one does the rest.
+  void maintain_in_background() override {
+    if (checkpointer_.joinable()) return;
+    sqlite3* own = nullptr;
+    // A connection that has read nothing yet does not know the file is in WAL mode, and its
+    // checkpoints do nothing: the pragma opens the log.
+    if (sqlite3_open_v2(path_.c_str(), &own, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOMUTEX, nullptr) != SQLITE_OK ||
+        sqlite3_exec(own, "PRAGMA journal_mode=WAL", nullptr, nullptr, nullptr) != SQLITE_OK) {
+      const std::string why = own ? sqlite3_errmsg(own) : "out of memory";
+      sqlite3_close(own);
+      throw Error("workspace " + path_.string() + ": cannot open a connection for background checkpoints: " + why);
+    }
+    sqlite3_busy_timeout(own, 1000);
+    sqlite3_wal_hook(
+        db_,
+        [](void* self, sqlite3*, const char*, int pages) {
+          auto& me = *static_cast<SqliteDatabase*>(self);
+          if (pages >= kCheckpointPages) {
+            std::lock_guard lock(me.checkpoint_mutex_);
+            me.checkpoint_due_ = true;
+            me.checkpoint_wanted_.notify_one();
+          }
+          return SQLITE_OK;
+        },
+        this);
+    checkpointer_ = std::thread([this, own] {
+      run_in_background();
+      std::unique_lock lock(checkpoint_mutex_);
+      while (true) {
+        checkpoint_wanted_.wait(lock, [&] { return stop_ || checkpoint_due_; });
+        if (stop_) break;
+        checkpoint_due_ = false;
+        lock.unlock();
+        // Busy or not complete (a reader on an old snapshot): the next commit asks again.
+        sqlite3_wal_checkpoint_v2(own, nullptr, SQLITE_CHECKPOINT_PASSIVE, nullptr, nullptr);
+        lock.lock();
+      }
+      sqlite3_close(own);
+    });
+  }
+
  private:
   void check(int rc, const std::string& sql) {
     if (rc == SQLITE_OK || rc == SQLITE_ROW || rc == SQLITE_DONE) return;
@@ -146,6 +202,11 @@ class SqliteDatabase final : public Database {
   }
 
   static constexpr size_t kMaxStatements = 256;
+  static constexpr int kCheckpointPages = 1000;  ///< SQLite's own default
+  std::thread checkpointer_;
+  std::mutex checkpoint_mutex_;
+  std::condition_variable checkpoint_wanted_;
+  bool checkpoint_due_ = false, stop_ = false;
   std::filesystem::path path_;
   sqlite3* db_ = nullptr;
   std::unordered_map<std::string, sqlite3_stmt*> statements_;  ///< prepared, by their SQL

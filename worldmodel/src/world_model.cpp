@@ -6,11 +6,10 @@
 #include <functional>
 #include <set>
 
-#include <sys/resource.h>
-#include <unistd.h>
 
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/mesh_format.hpp"
+#include "artisan/core/scheduling.hpp"
 #include "artisan/perception/kdtree.hpp"
 #include "artisan/perception/spin_image.hpp"
 #include "artisan/worldmodel/multimesh.hpp"
@@ -432,8 +431,7 @@ SceneChanges WorldModel::refresh() {
 void WorldModel::start_environment_job() {
   if (job_.valid() || !latest_ || latest_->signature == environment_signature_ || !options_.environment_in_background) return;
   job_ = std::async(std::launch::async, [cut = *latest_]() mutable {
-    // Below the thread that serves queries and edits: on a busy machine they come first.
-    setpriority(PRIO_PROCESS, pid_t(::gettid()), 10);
+    run_in_background();  // below the thread that serves queries and edits
     cut.run(true);
     return std::make_unique<EnvironmentCut>(std::move(cut));
   });
@@ -479,7 +477,7 @@ SceneChanges WorldModel::poll_environment(bool wait) {
 void WorldModel::release(std::vector<std::shared_ptr<const void>> garbage) {
   if (release_.valid()) release_.wait();  // the previous batch: long gone by now
   release_ = std::async(std::launch::async, [garbage = std::move(garbage)]() mutable {
-    setpriority(PRIO_PROCESS, pid_t(::gettid()), 10);
+    run_in_background();
     garbage.clear();
   });
 }

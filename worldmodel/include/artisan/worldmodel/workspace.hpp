@@ -156,6 +156,8 @@ class Workspace {
 
   CheckReport check() const;
   const Database& database() const { return *db_; }
+  /// See Database::maintain_in_background: for a long-running writer that answers clients.
+  void maintain_in_background() { db_->maintain_in_background(); }
 
  private:
   /// `folder_path`: the path of the row's folder when the caller knows it (saves the walk up).
