@@ -234,6 +234,40 @@ TEST_F(ServiceTest, CommandsChangeTheSceneForEveryClientAndSurviveARestart) {
   EXPECT_GT(carol.revision(), seen);
 }
 
+// Method: the service polls every 0.05 s. Idle, and after its own edits, it does not re-read
+// the workspace (the change stamp is as it left it); a commit through another connection (the
+// command line, another process) is re-read once and reaches the client.
+TEST_F(ServiceTest, ThePollReReadsOnlyWhatOthersCommitted) {
+  start();
+  SceneClient client(lcm, "operator", pump());
+  ASSERT_TRUE(client.wait_for_scene(10));
+  const auto pump_for = [&](double s) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(s);
+    while (std::chrono::steady_clock::now() < end) client.pump(10);
+  };
+  pump_for(0.3);
+  EXPECT_EQ(service->stats().workspace_rereads, 0);
+
+  artisan::command_t c;
+  c.type = artisan::command_t::CORRECT_POSE;
+  c.author = "alice";
+  c.object_id = f.bunny;
+  c.pose = pose(Transform(Eigen::Translation3d(-0.1, 0, 0)) * f.T_world_bunny);
+  ASSERT_TRUE(client.command(c).ok);
+  pump_for(0.3);
+  EXPECT_EQ(service->stats().workspace_rereads, 0) << "its own edit is in the world model already";
+
+  {
+    auto other = worldmodel::Workspace::open(dir / "ws.db");
+    worldmodel::WorldModel(other, "/cell").remove_object(f.bunny, "dave");
+  }
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (client.objects().count(f.bunny) && std::chrono::steady_clock::now() < end) client.pump(10);
+  EXPECT_FALSE(client.objects().count(f.bunny));
+  pump_for(0.3);
+  EXPECT_EQ(service->stats().workspace_rereads, 1);
+}
+
 // The UR5 standing 5 cm above the floor of the fixture, beside the bunny, its arm out straight.
 class RobotServiceTest : public ServiceTest {
  protected:

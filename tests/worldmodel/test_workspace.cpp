@@ -184,6 +184,27 @@ TEST_F(WorkspaceTest, BackgroundMaintenanceCheckpointsTheLogWhileTheWriterGoesOn
   EXPECT_TRUE(ws_.check().problems.empty());
 }
 
+TEST_F(WorkspaceTest, TheChangeStampCountsOwnCommitsAndSeesOthers) {
+  const auto s0 = ws_.change_stamp();
+  ws_.children(ws_.root());
+  EXPECT_EQ(ws_.change_stamp(), s0) << "reading commits nothing";
+  ws_.mkdir("/a");
+  const auto s1 = ws_.change_stamp();
+  EXPECT_EQ(s1.own, s0.own + 1);
+  EXPECT_EQ(s1.others, s0.others) << "its own commits are not others'";
+  ws_.write([&] {
+    ws_.mkdir("/b");
+    ws_.mkdir("/c");
+  });
+  EXPECT_EQ(ws_.change_stamp().own, s1.own + 1) << "one transaction, one commit";
+  const auto s2 = ws_.change_stamp();
+  Workspace::open(dir_ / "ws.db").mkdir("/d");
+  const auto s3 = ws_.change_stamp();
+  EXPECT_EQ(s3.own, s2.own);
+  EXPECT_NE(s3.others, s2.others);
+  EXPECT_EQ(ws_.change_stamp(), s3);
+}
+
 TEST(WorkspaceSchema, RefusesNonWorkspacesAndNewerSchemas) {
   test::TempDir dir;
   EXPECT_THROW(Workspace::open(dir / "missing.db"), Error);

@@ -147,6 +147,7 @@ class SqliteDatabase final : public Database {
   }
 
   std::string description() const override { return "sqlite:" + path_.string(); }
+  int64_t others_version() override { return std::get<int64_t>(query("PRAGMA data_version", {}).at(0).at(0)); }
 
   // SQLite's own checkpoint runs inside the commit that fills the log past 1000 pages, and
   // fsyncs the log and the database: milliseconds, up to tens of them on a busy disk, in the

@@ -227,6 +227,7 @@ void Workspace::write(const std::function<void()>& fn) {
   }
   --write_depth_;
   tx.commit();
+  ++commits_;
 }
 
 ObjectId Workspace::root() const {

@@ -34,6 +34,7 @@ struct ServiceStats {
   int64_t commands_refused = 0;
   int64_t malformed_messages = 0;
   int64_t mesh_chunks_sent = 0;
+  int64_t workspace_rereads = 0;  ///< polls that found a commit the world model had not read
 };
 
 class Service {

@@ -32,6 +32,9 @@ class Database {
   /// Backend-level integrity problems (corrupt pages, foreign-key violations); empty when sound.
   virtual std::vector<std::string> integrity_problems() = 0;
   virtual std::string description() const = 0;  ///< e.g. "sqlite:/path/to/artisan.db"
+  /// A number that changes whenever another connection commits to the database (this
+  /// connection's own commits leave it as it is). SQLite: PRAGMA data_version.
+  virtual int64_t others_version() = 0;
   /// From now on, durable maintenance that a commit would otherwise do itself (SQLite: copying
   /// the write-ahead log into the database file, with its fsyncs) runs on a background thread,
   /// so that a writer that must answer within milliseconds (the world-model service) is not

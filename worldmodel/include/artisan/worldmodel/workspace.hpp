@@ -92,6 +92,14 @@ struct CheckReport {
 void validate_path(const std::string& path);
 void validate_name(const std::string& name);
 
+/// What has been committed to a workspace: `own` counts this Workspace object's commits,
+/// `others` changes when any other connection commits (another process, another Workspace on
+/// the same file). Equal stamps: nothing was committed in between.
+struct ChangeStamp {
+  int64_t own = 0, others = 0;
+  bool operator==(const ChangeStamp&) const = default;
+};
+
 class Workspace {
  public:
   static constexpr int kSchemaVersion = 3;  ///< 2: grid blocks; 3: robot objects
@@ -156,6 +164,8 @@ class Workspace {
 
   CheckReport check() const;
   const Database& database() const { return *db_; }
+  /// See ChangeStamp: a long-running reader skips re-reading an unchanged workspace.
+  ChangeStamp change_stamp() const { return {commits_, db_->others_version()}; }
   /// See Database::maintain_in_background: for a long-running writer that answers clients.
   void maintain_in_background() { db_->maintain_in_background(); }
 
@@ -167,6 +177,7 @@ class Workspace {
   ObjectId insert_object(ObjectId folder, const NewObject& object, int64_t version, std::optional<ObjectId> previous);
   std::unique_ptr<Database> db_;
   int write_depth_ = 0;
+  int64_t commits_ = 0;  ///< write() transactions committed
 };
 
 }  // namespace artisan::worldmodel
