@@ -150,7 +150,7 @@ TEST_F(GridCli, MergeMultiMeshMatchesStanfordReconstruction) {
 }
 
 TEST_F(GridCli, GridNewAddExtractAndBadInput) {
-  auto r = run("--json grid new g --voxel 0.001 --folder /b --budget-mb 16 --channels per-mesh --sensor laser");
+  auto r = run("--json grid new g --voxel 0.001 --folder /b --budget-mb 24 --channels per-mesh --sensor laser");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(json::parse(r.out)["definition"]["channels"], "per_mesh");
   r = run("--json grid add /b/g /b/bun000-mesh");

@@ -183,6 +183,7 @@ TEST(Integration, ResultIndependentOfDistributionOrder) {
 TEST(Integration, ResultIndependentOfMemoryBudget) {
   GridDefinition unlimited;
   unlimited.voxel_size_m = 0.001;
+  unlimited.block_edge_voxels = 16;  // small blocks: many of them, each evicted many times
   unlimited.memory_budget_bytes = size_t{1} << 40;
   GridDefinition tiny = unlimited;
   tiny.memory_budget_bytes = 8 * (tiny.block_surface_bytes() + tiny.block_channel_bytes());

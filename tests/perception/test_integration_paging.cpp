@@ -47,6 +47,7 @@ TEST(IntegrationPaging, PeakMemoryStaysWithinBudgetAndSurfaceIsUnchanged) {
   constexpr int kSpheres = 27;
   GridDefinition def;
   def.voxel_size_m = 0.001;
+  def.block_edge_voxels = 16;  // 12 MiB holds 8 of these (the default 32-voxel blocks need 18 MiB)
   def.memory_budget_bytes = size_t{12} << 20;
   test::TempDir dir;
   test::FileBlockStore files(dir.path());

@@ -147,15 +147,19 @@ TEST_F(GridStoreTest, MeshAddedAfterARestartGivesTheSameSurfaceAsAllAtOnce) {
   EXPECT_TRUE(ws.check().problems.empty());
 }
 
-// Method: the three scans into a grid whose budget is the minimum (8 blocks, about 2 MiB) while
-// the grid needs tens of MiB, and into one with the default 256 MiB budget: the cache must evict,
+// Method: the three scans into a grid of 16-voxel blocks whose budget is the minimum (8 blocks,
+// about 2 MiB) while the grid needs tens of MiB, and into one with the default 256 MiB budget:
+// the cache must evict,
 // and the two surfaces must be identical.
 TEST_F(GridStoreTest, BudgetSmallerThanTheGridGivesTheSameSurface) {
   auto ws = Workspace::open(path_);
   GridDefinition small = definition();
+  small.block_edge_voxels = 16;  // small blocks: a budget of 8 of them is a small part of the grid
   small.memory_budget_bytes = 8 * (small.block_surface_bytes() + small.block_channel_bytes());
   const auto tight = create_grid(ws, folder_, "tight", small);
-  const auto roomy = create_grid(ws, folder_, "roomy", definition());
+  GridDefinition large = definition();
+  large.block_edge_voxels = 16;
+  const auto roomy = create_grid(ws, folder_, "roomy", large);
   size_t evictions = 0, block_bytes = 0;
   for (const auto& name : kScans) {
     const auto r = add_to_grid(ws, tight, mesh_[name], T_world(name));
