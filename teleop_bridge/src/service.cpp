@@ -46,9 +46,6 @@ struct Service::Impl {
   worldmodel::Workspace& ws;
   lcm::LCM& lcm;
   ServiceOptions options;
-  // The workspace as the world model has read it: taken before each read, so that a commit
-  // made during one is seen again at the next poll. The poll re-reads only when it changed.
-  worldmodel::ChangeStamp seen;
   worldmodel::WorldModel world;
   ServiceStats stats;
   Clock::time_point started = Clock::now(), last_snapshot{}, last_heartbeat{}, last_poll = Clock::now();
@@ -57,7 +54,7 @@ struct Service::Impl {
   std::set<ObjectId> environment_published;
 
   Impl(worldmodel::Workspace& w, lcm::LCM& l, ServiceOptions o)
-      : ws(w), lcm(l), options(std::move(o)), seen(ws.change_stamp()), world(ws, options.folder, options.world) {
+      : ws(w), lcm(l), options(std::move(o)), world(ws, options.folder, options.world) {
     if (!lcm.good()) throw Error("LCM is not available (bad URL or no network)");
     ws.maintain_in_background();  // an edit's commit never waits for a checkpoint's fsync
     if (options.service_id.empty()) options.service_id = "artisand-" + std::to_string(::getpid());
@@ -140,16 +137,14 @@ struct Service::Impl {
     }
   }
 
-  // Re-reads the workspace when anything was committed since the world model last read it.
+  // Re-reads the workspace when anything was committed that the world model has not read.
   void refresh() {
-    const auto stamp = ws.change_stamp();
-    if (stamp == seen) return;
+    if (!world.workspace_changed()) return;
     const int64_t base = world.revision();
     ++stats.workspace_rereads;
     try {
       publish_changes(base, world.refresh());
       publish_environment();
-      seen = stamp;
       status = "ok";
     } catch (const std::exception& e) {
       status = std::string("cannot read the workspace: ") + e.what();
@@ -286,7 +281,6 @@ struct Service::Impl {
     r.request_id = c.request_id;
     r.object_id = c.object_id;
     const int64_t base = world.revision();
-    const auto before = ws.change_stamp();
     try {
       switch (c.type) {
         case artisan::command_t::RERECOGNIZE: {
@@ -327,10 +321,6 @@ struct Service::Impl {
       }
       r.ok = true;
       ++stats.commands_applied;
-      // An edit applies its own commit to the world model: when nothing else was committed
-      // since the last read (nor by others during the edit), the next poll need not re-read.
-      const auto after = ws.change_stamp();
-      if (c.type != artisan::command_t::RERECOGNIZE && before == seen && after.others == before.others) seen = after;
     } catch (const std::exception& e) {
       r.ok = false;
       r.message = e.what();

@@ -6,7 +6,6 @@
 #include <functional>
 #include <set>
 
-
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/mesh_format.hpp"
 #include "artisan/core/scheduling.hpp"
@@ -371,7 +370,9 @@ std::string WorldModel::mesh_hash(const std::shared_ptr<const TriangleMesh>& mes
 }
 
 SceneChanges WorldModel::refresh() {
+  const auto stamp = ws_.change_stamp();  // before the read: a commit during it is seen next time
   Loaded loaded = load();
+  read_ = stamp;
   SceneChanges changes;
   std::map<ObjectId, const SceneObject*> before;
   for (const auto& o : objects_) before[o.object_id] = &o;
@@ -636,6 +637,9 @@ void WorldModel::apply_edit(ObjectId object_id, ObjectId version_id) {
   constexpr int64_t kPerRow = 1000;
   revision_ = std::max(revision_ + 1, version_id * kPerRow);
   last_changes_ = changes;
+  // Read as well: when the edit's commit is the only one since the last read.
+  const auto stamp = ws_.change_stamp();
+  if (stamp.own == read_.own + 1 && stamp.others == read_.others) read_ = stamp;
 }
 
 ObjectId WorldModel::correct_pose(ObjectId object_id, const Transform& T_world_object, const std::string& author) {

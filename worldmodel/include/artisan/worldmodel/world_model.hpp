@@ -136,6 +136,10 @@ class WorldModel {
 
   /// Re-reads the folder; updates the scene and the collision scene where they changed.
   SceneChanges refresh();
+  /// Whether anything was committed to the workspace that this model has not read: by another
+  /// connection, or through the workspace other than by this model's own edits (which it
+  /// applies as it makes them). When false, refresh() would find nothing.
+  bool workspace_changed() const { return ws_.change_stamp() != read_; }
   /// What the last refresh (or edit, or installed environment) changed.
   const SceneChanges& last_changes() const { return last_changes_; }
   /// True while an environment re-cut is under way on the worker thread.
@@ -181,6 +185,7 @@ class WorldModel {
   WorldModelOptions options_;
   int64_t revision_ = 0;
   SceneChanges last_changes_;
+  ChangeStamp read_;  ///< the workspace as last read (taken before the read) or edited by this model
   std::vector<SceneObject> objects_;
   std::vector<SceneRobot> robots_;
   std::map<ObjectId, SceneRobot> robot_versions_;  ///< loaded robot versions, by workspace row
