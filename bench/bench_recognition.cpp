@@ -253,6 +253,9 @@ int main(int argc, char** argv) {
       else if (k == "pair_score_points") tuned.pair_score_points = int(v);
       else if (k == "pair_min_support") tuned.pair_min_support = v;
       else if (k == "pair_pool") tuned.pair_pool = int(v);
+      else if (k == "voting_pool") tuned.voting_pool = int(v);
+      else if (k == "max_rmse_factor") tuned.max_rmse_factor = v;
+      else if (k == "pair_step_fraction") library_params.pair_step_fraction = v;
       else if (k == "coarse_refined") tuned.coarse_refined = int(v);
       else if (k == "max_instances") tuned.max_instances = int(v);
       else if (k == "max_continued_fraction") tuned.max_continued_fraction = v;
@@ -396,12 +399,18 @@ int main(int argc, char** argv) {
           right += (library.model_points(mt.model_index).points[mt.model_point] - local).norm() < 0.006f;
         }
         std::fprintf(stderr, "  [matches on it: %d of any model, %d of its model, %d right]", basis_on, on_instance, right);
-        const std::string stage = !best ? "no-pose" : best->stage == RecognitionCandidate::Stage::coarse ? "not-refined" : "refused";
+        const std::string stage = !best                                                   ? "no-pose"
+                                  : best->stage == RecognitionCandidate::Stage::proposed ? "not-refined"
+                                  : best->stage == RecognitionCandidate::Stage::coarse   ? "refined-coarse-only"
+                                                                                         : "refused";
         ++diagnosis[stage];
         std::fprintf(stderr, "  missed %s (%.0f%% occluded): %s", inst.model.c_str(), 100 * (1 - inst.visible), stage.c_str());
         if (best)
-          std::fprintf(stderr, " rank %d overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f group %zu", rank_best,
-                       best->overlap_fraction, best->rmse_m * 1e3, best->free_space_fraction, best->visible_explained, best->occluded_fraction,
+          std::fprintf(stderr, " (%s) rank %d overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f group %zu",
+                       best->source == RecognitionCandidate::Source::voting  ? "voting"
+                       : best->source == RecognitionCandidate::Source::pairs ? "pairs"
+                                                                             : "grouping",
+                       rank_best, best->overlap_fraction, best->rmse_m * 1e3, best->free_space_fraction, best->visible_explained, best->occluded_fraction,
                        best->continued_fraction, best->correspondences);
         std::fprintf(stderr, "\n");
       }

@@ -160,12 +160,11 @@ TEST(Recognition, AnInstanceHalfHiddenBehindAnotherObjectIsFound) {
 
 // Pipes and fittings are nearly surfaces of revolution: a scene point's spin image matches many
 // model points equally well, and its right model point is rarely the nearest. Method: a 350 mm
-// pipe and an elbow dropped on a table, seen by a simulated Vivid; recognized with the pose
-// hypotheses from pairs of matches alone (no Johnson & Hebert grouping), which must find each
-// at its true pose up to its symmetries (BOP's MSSD: every model point at the found pose within
-// 10% of the diameter of the model surface at the true pose, so a pipe turned about or flipped
-// end for end counts), and nothing else.
-TEST(Recognition, PairsOfAmbiguousMatchesFindPipework) {
+// pipe and an elbow dropped on a table, seen by a simulated Vivid; recognized with one source of
+// pose hypotheses alone (`only`), which must find each at its true pose up to its symmetries
+// (BOP's MSSD: every model point at the found pose within 10% of the diameter of the model
+// surface at the true pose, so a pipe turned about or flipped end for end counts), and nothing else.
+void expect_pipework_found(RecognitionParams params) {
   const test::TempDir dir;
   const auto models = test::data_dir() / "workcells" / "models";
   const auto objects = nlohmann::json::array({
@@ -181,7 +180,6 @@ TEST(Recognition, PairsOfAmbiguousMatchesFindPipework) {
     library.add_model(name, mesh);
     surfaces[name] = sample_surface(mesh, 0.002);
   }
-  RecognitionParams params;
   params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
   params.group_hypotheses = false;
   const auto result = recognize(mesh_range_image(acquisition.range).mesh, library, params);
@@ -206,6 +204,20 @@ TEST(Recognition, PairsOfAmbiguousMatchesFindPipework) {
     EXPECT_EQ(found, 1) << name << " (visible " << truth.visible_fraction << ") not found at its pose exactly once";
   }
   EXPECT_EQ(result.instances.size(), 2u) << "false instances";
+}
+
+// Poses from pairs of spin-image matches alone (no grouping, no voting).
+TEST(Recognition, PairsOfAmbiguousMatchesFindPipework) {
+  RecognitionParams params;
+  params.voting_pool = 0;
+  expect_pipework_found(params);
+}
+
+// Poses from point-pair-feature voting alone (no spin-image match used at all).
+TEST(Recognition, PointPairVotingFindsPipework) {
+  RecognitionParams params;
+  params.pair_partners = 0;
+  expect_pipework_found(params);
 }
 
 // Where an object's seen surface ends, the scene steps away or turns: its silhouette. Method:

@@ -16,10 +16,19 @@
 
 namespace artisan {
 
+namespace detail {
+class PairFeatureModel;
+}
+
 struct ModelLibraryParams {
   double resolution_m = 0.003;  ///< [m] models and scenes are resampled to this before spin images
   SpinImageParams spin;
   double pca_variance = 0.95;   ///< [1] share of the spin-image variance the compressed space keeps
+  /// Point-pair-feature tables (RecognitionParams::voting_pool): each model's sampling step is
+  /// this share of its diameter (Drost et al. use 0.025-0.05), but at least
+  /// pair_min_step_factor resolutions.
+  double pair_step_fraction = 0.03;
+  double pair_min_step_factor = 2.0;  ///< [resolutions]
 };
 
 class SpinImageLibrary {
@@ -49,6 +58,8 @@ class SpinImageLibrary {
   /// Projects normalised spin images (bins x n) into the compressed space (components x n).
   Eigen::MatrixXf project(const Eigen::MatrixXf& images) const;
   bool compressed() const { return compressed_; }
+  /// Model m's point-pair-feature table (made by compress()).
+  const detail::PairFeatureModel& pair_features(size_t m) const { return *models_[m].pairs; }
 
   struct Match {
     float d2;  ///< squared distance between normalised images (2 - 2 x correlation)
@@ -65,6 +76,7 @@ class SpinImageLibrary {
     PointCloud points;
     Eigen::MatrixXf images;
     Eigen::MatrixXf coefficients;
+    std::shared_ptr<const detail::PairFeatureModel> pairs;
   };
   ModelLibraryParams params_;
   std::vector<Model> models_;
@@ -103,13 +115,21 @@ struct RecognitionParams {
   double pair_min_distance_factor = 5.0;        ///< [resolutions] closer pairs fix no stable pose
   int pair_score_points = 200;         ///< [1] model points (evenly subsampled) that score a hypothesis
   double pair_min_support = 0.05;      ///< [1] share of those that must land on the scene surface
-  int pair_pool = 200;                 ///< [1] best distinct pair hypotheses kept per model
+  /// Poses from point-pair-feature voting (Drost et al. 2010: every scene pair within a model's
+  /// diameter votes, through a table of the model's pairs, for a model point and a rotation
+  /// about its normal), which needs no spin-image match at all: the best pose clusters of each
+  /// model join the pair hypotheses, scored the same way.
+  int voting_pool = 100;               ///< [1] best vote clusters per model that become hypotheses (0: no voting)
+  int pair_pool = 200;                 ///< [1] best distinct pair and voting hypotheses kept per model
   /// [1] starting poses refined by the coarse ICP per instance search, of the groups and of the
   /// pair hypotheses each: those that put the most sampled model points on scene surface not yet
   /// explained
-  int coarse_refined = 15;
+  int coarse_refined = 30;
   double min_model_overlap = 0.15;     ///< [1] share of the model's points that must lie on the scene (less the share occluded)
-  double max_rmse_factor = 0.5;        ///< [1] largest accepted residual, in resolutions
+  /// [1] largest accepted residual, in resolutions. True instances in the simulated clutter bench
+  /// fit within 0.6 mm (0.2 resolutions); a pipe fitted to another part's or a distractor's
+  /// cylinder of a slightly different radius leaves 1.0-1.3 mm.
+  double max_rmse_factor = 0.3;
   int max_instances = 5;               ///< [1] per model
   /// [1] an instance sharing more than this share of the scene surface it explains with an
   /// instance (of another model) that explains more is dropped; a pose of a model on surface an
@@ -159,8 +179,11 @@ struct RecognitionCandidate {
   size_t model_index = 0;
   Transform T_scene_model = Transform::Identity();
   double overlap_fraction = 0, rmse_m = 0, free_space_fraction = 0, visible_explained = 1, occluded_fraction = 0, continued_fraction = 0;
-  size_t correspondences = 0;
-  enum class Stage { coarse, refused, accepted } stage = Stage::coarse;  ///< coarse: never refined
+  size_t correspondences = 0;     ///< in its group; for a pair or voting hypothesis, the sampled model points it put on the scene
+  enum class Source { grouping, pairs, voting } source = Source::grouping;
+  /// proposed: a pair or voting hypothesis in the pool that no coarse ICP refined; coarse: refined
+  /// by the coarse ICP only
+  enum class Stage { proposed, coarse, refused, accepted } stage = Stage::coarse;
 };
 
 struct RecognitionResult {

@@ -1,0 +1,189 @@
+#include "point_pair_voting.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <Eigen/Geometry>
+
+#include "artisan/core/error.hpp"
+#include "artisan/perception/kdtree.hpp"
+#include "artisan/perception/spin_image.hpp"
+
+namespace artisan::detail {
+
+namespace {
+
+constexpr float kTwoPi = 2 * std::numbers::pi_v<float>;
+
+// The transform that moves p to the origin and turns n onto +x (section 3.3: T_m->g, T_s->g).
+Transform to_local(const Eigen::Vector3f& p, const Eigen::Vector3f& n) {
+  const Eigen::Quaterniond q = Eigen::Quaterniond::FromTwoVectors(n.cast<double>(), Eigen::Vector3d::UnitX());
+  Transform T = Transform::Identity();
+  T.linear() = q.toRotationMatrix();
+  T.translation() = -(T.linear() * p.cast<double>());
+  return T;
+}
+
+// The angle of a partner about +x in the local frame of its reference point.
+float alpha_of(const Transform& T_local, const Eigen::Vector3f& partner) {
+  const Eigen::Vector3d q = T_local * partner.cast<double>();
+  return static_cast<float>(std::atan2(q.z(), q.y()));
+}
+
+}  // namespace
+
+int64_t PairFeatureModel::cell(const Eigen::Vector3f& p1, const Eigen::Vector3f& n1, const Eigen::Vector3f& p2, const Eigen::Vector3f& n2) const {
+  const Eigen::Vector3f d = p2 - p1;
+  const float length = d.norm();
+  if (!(length > 0.5f * static_cast<float>(params_.step_m))) return -1;
+  const auto distance_bin = static_cast<int64_t>(length / static_cast<float>(params_.step_m));
+  if (distance_bin >= distance_bins_) return -1;
+  const Eigen::Vector3f u = d / length;
+  const int a = params_.angle_bins;
+  const auto angle_bin = [a](float cosine) {
+    const float angle = std::acos(std::clamp(cosine, -1.0f, 1.0f));
+    return std::min<int64_t>(a - 1, static_cast<int64_t>(angle / std::numbers::pi_v<float> * static_cast<float>(a)));
+  };
+  return ((distance_bin * a + angle_bin(n1.dot(u))) * a + angle_bin(n2.dot(u))) * a + angle_bin(n1.dot(n2));
+}
+
+PairFeatureModel::PairFeatureModel(const PointCloud& model_points, const PairVotingParams& params) : params_(params) {
+  if (!(params.step_m > 0) || params.angle_bins < 2 || params.alpha_bins < 4 || params.reference_stride < 1 || params.peaks_per_reference < 1)
+    throw Error("point-pair voting: step " + std::to_string(params.step_m) + " m, angle bins " + std::to_string(params.angle_bins) +
+                ", alpha bins " + std::to_string(params.alpha_bins) + ", reference stride " + std::to_string(params.reference_stride) +
+                " and peaks " + std::to_string(params.peaks_per_reference) + " must be positive (at least 2, 4, 1, 1)");
+  if (model_points.normals.size() != model_points.points.size()) throw Error("point-pair voting: the model points have no normals");
+  points_ = resample_oriented_points(model_points, params.step_m);
+  const auto box = points_.bounds();
+  diameter_ = static_cast<double>(box.diagonal().norm());
+  distance_bins_ = static_cast<int>(diameter_ / params.step_m) + 1;
+  const auto& p = points_.points;
+  const auto& n = points_.normals;
+  for (size_t i = 0; i < p.size(); ++i) T_local_model_.push_back(to_local(p[i], n[i]));
+  const auto a = static_cast<size_t>(params.angle_bins);
+  // Counting sort of every ordered pair by its cell: count, prefix sums, fill. Cells holding more
+  // than max_cell_share of the pairs are left empty.
+  std::vector<int64_t> cells(p.size() * p.size(), -1);
+  std::vector<uint32_t> count(static_cast<size_t>(distance_bins_) * a * a * a, 0);
+  for (size_t i = 0; i < p.size(); ++i)
+    for (size_t j = 0; j < p.size(); ++j)
+      if (i != j && (cells[i * p.size() + j] = cell(p[i], n[i], p[j], n[j])) >= 0) ++count[static_cast<size_t>(cells[i * p.size() + j])];
+  size_t total = 0;
+  for (const auto c : count) total += c;
+  const double cap = params.max_cell_share * static_cast<double>(total);
+  offsets_.assign(count.size() + 1, 0);
+  for (size_t c = 0; c < count.size(); ++c) {
+    if (static_cast<double>(count[c]) > cap) dropped_ += count[c], count[c] = 0;
+    offsets_[c + 1] = offsets_[c] + count[c];
+  }
+  entries_.resize(offsets_.back());
+  std::vector<uint32_t> fill(offsets_.begin(), offsets_.end() - 1);
+  for (size_t i = 0; i < p.size(); ++i)
+    for (size_t j = 0; j < p.size(); ++j)
+      if (const auto c = cells[i * p.size() + j]; c >= 0 && count[static_cast<size_t>(c)] > 0)
+        entries_[fill[static_cast<size_t>(c)]++] = {static_cast<uint32_t>(i), alpha_of(T_local_model_[i], p[j])};
+}
+
+std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std::vector<char>& ignore) const {
+  std::vector<VotedPose> out;
+  if (points_.points.empty() || entries_.empty()) return out;
+  PointCloud kept;
+  for (size_t i = 0; i < scene.points.size(); ++i)
+    if (i >= ignore.size() || !ignore[i]) kept.points.push_back(scene.points[i]), kept.normals.push_back(scene.normals[i]);
+  if (kept.points.size() < 2) return out;
+  const PointCloud samples = resample_oriented_points(kept, params_.step_m);
+  const KdTree3 tree(samples.points);
+  const auto& s = samples.points;
+  const auto& sn = samples.normals;
+  const size_t model_points = points_.points.size();
+  const auto alpha_bins = static_cast<size_t>(params_.alpha_bins);
+  const float alpha_scale = static_cast<float>(params_.alpha_bins) / kTwoPi;
+  const float radius = static_cast<float>(diameter_);
+
+  // Per reference point: its accumulator's peaks, as poses with their votes (eq. 3-4).
+  std::vector<size_t> references;
+  for (size_t r = 0; r < s.size(); r += static_cast<size_t>(params_.reference_stride)) references.push_back(r);
+  std::vector<std::vector<VotedPose>> peaks(references.size());
+#pragma omp parallel
+  {
+    std::vector<uint32_t> accumulator(model_points * alpha_bins);
+    std::vector<size_t> near;
+#pragma omp for schedule(dynamic, 8)
+    for (size_t k = 0; k < references.size(); ++k) {
+      const size_t r = references[k];
+      const Transform T_local_scene = to_local(s[r], sn[r]);
+      std::fill(accumulator.begin(), accumulator.end(), 0u);
+      tree.within(s[r], radius, near);
+      for (const size_t i : near) {
+        if (i == r) continue;
+        const auto c = cell(s[r], sn[r], s[i], sn[i]);
+        if (c < 0) continue;
+        const float alpha_s = alpha_of(T_local_scene, s[i]);
+        for (uint32_t e = offsets_[static_cast<size_t>(c)]; e < offsets_[static_cast<size_t>(c) + 1]; ++e) {
+          float alpha = alpha_s - entries_[e].alpha;
+          if (alpha < 0) alpha += kTwoPi;
+          const auto bin = std::min(alpha_bins - 1, static_cast<size_t>(alpha * alpha_scale));
+          ++accumulator[entries_[e].reference * alpha_bins + bin];
+        }
+      }
+      // The largest cells, at most peaks_per_reference of them.
+      auto& mine = peaks[k];
+      std::vector<std::pair<uint32_t, size_t>> best;  // votes, cell
+      for (size_t c = 0; c < accumulator.size(); ++c) {
+        if (accumulator[c] == 0 || (best.size() == static_cast<size_t>(params_.peaks_per_reference) && accumulator[c] <= best.back().first)) continue;
+        if (best.size() == static_cast<size_t>(params_.peaks_per_reference)) best.pop_back();
+        best.insert(std::upper_bound(best.begin(), best.end(), accumulator[c], [](uint32_t v, const auto& b) { return v > b.first; }),
+                    {accumulator[c], c});
+      }
+      const Transform T_scene_local = T_local_scene.inverse();
+      for (const auto& [votes, c] : best) {
+        const size_t m = c / alpha_bins;
+        const double alpha = (static_cast<double>(c % alpha_bins) + 0.5) * 2 * std::numbers::pi / static_cast<double>(alpha_bins);
+        const Transform R_x(Eigen::AngleAxisd(alpha, Eigen::Vector3d::UnitX()));
+        mine.push_back({T_scene_local * R_x * T_local_model_[m], votes});
+      }
+    }
+  }
+
+  // Pose clustering (section 3.4): in vote order, each pose joins the first cluster whose first
+  // pose puts the model's centre within cluster_distance of it and turns it by less than
+  // cluster_angle; a cluster's votes are its members' sum, its pose their vote-weighted mean
+  // (which is finer than the quantised alpha and sampling step of any one of them).
+  std::vector<VotedPose> poses;
+  for (auto& p : peaks) poses.insert(poses.end(), p.begin(), p.end());
+  std::stable_sort(poses.begin(), poses.end(), [](const VotedPose& a, const VotedPose& b) { return a.votes > b.votes; });
+  const Eigen::Vector3d centre = points_.bounds().center().cast<double>();
+  const double max_distance = params_.cluster_distance_factor * diameter_;
+  const double max_angle = params_.cluster_angle_deg * std::numbers::pi / 180;
+  struct Cluster {
+    Transform first;
+    Eigen::Vector3d centre, translation_sum = Eigen::Vector3d::Zero();
+    Eigen::Vector4d rotation_sum = Eigen::Vector4d::Zero();  ///< quaternions on the first's side
+    uint32_t votes = 0;
+  };
+  std::vector<Cluster> clusters;
+  for (const auto& p : poses) {
+    const Eigen::Vector3d c = p.T_scene_model * centre;
+    auto it = std::find_if(clusters.begin(), clusters.end(), [&](const Cluster& k) {
+      return (k.centre - c).norm() < max_distance && rotation_angle(k.first.inverse() * p.T_scene_model) < max_angle;
+    });
+    if (it == clusters.end()) it = clusters.insert(clusters.end(), Cluster{p.T_scene_model, c});
+    Eigen::Vector4d q = Eigen::Quaterniond(p.T_scene_model.linear()).coeffs();
+    if (q.dot(Eigen::Quaterniond(it->first.linear()).coeffs()) < 0) q = -q;
+    it->rotation_sum += p.votes * q;
+    it->translation_sum += p.votes * p.T_scene_model.translation();
+    it->votes += p.votes;
+  }
+  for (const auto& k : clusters) {
+    VotedPose v;
+    v.T_scene_model.linear() = Eigen::Quaterniond(Eigen::Vector4d(k.rotation_sum.normalized())).toRotationMatrix();
+    v.T_scene_model.translation() = k.translation_sum / static_cast<double>(k.votes);
+    v.votes = k.votes;
+    out.push_back(v);
+  }
+  std::stable_sort(out.begin(), out.end(), [](const VotedPose& a, const VotedPose& b) { return a.votes > b.votes; });
+  return out;
+}
+
+}  // namespace artisan::detail
