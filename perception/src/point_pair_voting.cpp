@@ -49,10 +49,12 @@ int64_t PairFeatureModel::cell(const Eigen::Vector3f& p1, const Eigen::Vector3f&
 }
 
 PairFeatureModel::PairFeatureModel(const PointCloud& model_points, const PairVotingParams& params) : params_(params) {
-  if (!(params.step_m > 0) || params.angle_bins < 2 || params.alpha_bins < 4 || params.reference_stride < 1 || params.peaks_per_reference < 1)
-    throw Error("point-pair voting: step " + std::to_string(params.step_m) + " m, angle bins " + std::to_string(params.angle_bins) +
-                ", alpha bins " + std::to_string(params.alpha_bins) + ", reference stride " + std::to_string(params.reference_stride) +
-                " and peaks " + std::to_string(params.peaks_per_reference) + " must be positive (at least 2, 4, 1, 1)");
+  if (!(params.step_m > 0) || params.angle_bins < 2 || params.alpha_bins < 4 || params.reference_stride < 1 || params.peaks_per_reference < 1 ||
+      !(params.max_cell_share > 0 && params.max_cell_share <= 1))
+    throw Error("point-pair voting: step " + std::to_string(params.step_m) + " m must be positive, angle bins " +
+                std::to_string(params.angle_bins) + " at least 2, alpha bins " + std::to_string(params.alpha_bins) + " at least 4, reference stride " +
+                std::to_string(params.reference_stride) + " and peaks " + std::to_string(params.peaks_per_reference) +
+                " at least 1, and max_cell_share " + std::to_string(params.max_cell_share) + " in (0, 1]");
   if (model_points.normals.size() != model_points.points.size()) throw Error("point-pair voting: the model points have no normals");
   points_ = resample_oriented_points(model_points, params.step_m);
   const auto box = points_.bounds();
