@@ -89,6 +89,9 @@ PairFeatureModel::PairFeatureModel(const PointCloud& model_points, const PairVot
 
 std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std::vector<char>& ignore) const {
   std::vector<VotedPose> out;
+  if (scene.normals.size() != scene.points.size())
+    throw Error("point-pair voting: the scene has " + std::to_string(scene.points.size()) + " points but " + std::to_string(scene.normals.size()) +
+                " normals");
   if (points_.points.empty() || entries_.empty()) return out;
   PointCloud kept;
   for (size_t i = 0; i < scene.points.size(); ++i)

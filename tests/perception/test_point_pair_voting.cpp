@@ -102,6 +102,8 @@ TEST(PointPairVoting, BadParametersThrow) {
   PointCloud no_normals;
   no_normals.points = model.points;
   EXPECT_THROW(detail::PairFeatureModel(no_normals, {}), Error);
+  const detail::PairFeatureModel table(model, {});
+  EXPECT_THROW(table.vote(no_normals, {}), Error);
 }
 
 }  // namespace
