@@ -269,17 +269,17 @@ struct PoseHypothesis {
 // A cheap verification of a model's pose, which ranks hypotheses before any ICP: of a sample of
 // the model's points (evenly spread), those at the pose that lie on the scene surface (within
 // `within_m` of a scene point whose normal agrees) not explained by an accepted instance.
-// (Subtracting those that lie where a sensor saw through ranked more true poses lower, whose
-// rough first pose puts part of the model in front of its own surface, than false ones: 83%
-// against 86% found on 15 bench scenes.)
 class SurfaceSupport {
  public:
   SurfaceSupport(const PointCloud& model, int sample_points, const PointCloud& scene, const KdTree3& scene_tree)
-      : model_(model), scene_(scene), tree_(scene_tree) {
+      : model_(model), scene_(scene), tree_(scene_tree), nothing_explained_(scene.points.size(), 0) {
     const size_t step = std::max<size_t>(1, model.points.size() / static_cast<size_t>(std::max(sample_points, 1)));
     for (size_t i = 0; i < model.points.size(); i += step) sample_.push_back(i);
   }
-  size_t sample_size() const { return sample_.size(); }
+  /// The least support a new hypothesis needs: `share` of the sample.
+  size_t min_support(double share) const { return static_cast<size_t>(std::ceil(share * static_cast<double>(sample_.size()))); }
+  /// The support of a new hypothesis, with nothing explained yet.
+  size_t first(const Transform& T_scene_model, double within_m) const { return (*this)(T_scene_model, within_m, nothing_explained_); }
   size_t operator()(const Transform& T_scene_model, double within_m, const std::vector<char>& explained) const {
     const Eigen::Isometry3f T = T_scene_model.cast<float>();
     const float within2 = static_cast<float>(within_m * within_m);
@@ -295,6 +295,7 @@ class SurfaceSupport {
   const PointCloud& model_;
   const PointCloud& scene_;
   const KdTree3& tree_;
+  const std::vector<char> nothing_explained_;
   std::vector<size_t> sample_;
 };
 
@@ -337,8 +338,7 @@ std::vector<PoseHypothesis> pair_hypotheses(const PointCloud& model, const Point
   const float min_distance = static_cast<float>(params.pair_min_distance_factor * res);
   const float tolerance = static_cast<float>(params.pair_distance_tolerance_factor * res);
   const float angle_tolerance = static_cast<float>(params.pair_angle_tolerance_deg * std::numbers::pi / 180);
-  const size_t min_support = static_cast<size_t>(std::ceil(params.pair_min_support * static_cast<double>(surface_support.sample_size())));
-  const std::vector<char> nothing_explained(scene.points.size(), 0);
+  const size_t min_support = surface_support.min_support(params.pair_min_support);
   const auto angle = [](const Eigen::Vector3f& a, const Eigen::Vector3f& b) { return std::acos(std::clamp(a.dot(b), -1.0f, 1.0f)); };
 
   std::vector<size_t> order(anchors.size());
@@ -373,7 +373,7 @@ std::vector<PoseHypothesis> pair_hypotheses(const PointCloud& model, const Point
             continue;
           PoseHypothesis h;
           h.T_scene_model = pose_from_pairs(model.points[m_a], model.normals[m_a], model.points[m_b], model.normals[m_b], s_a, ns_a, s_b, ns_b, l_s);
-          h.first_support = h.support = surface_support(h.T_scene_model, 1.5 * res, nothing_explained);
+          h.first_support = h.support = surface_support.first(h.T_scene_model, 1.5 * res);
           if (h.support >= min_support) made.push_back(std::move(h));
         }
     }
@@ -389,13 +389,12 @@ std::vector<PoseHypothesis> voting_hypotheses(const detail::PairFeatureModel& ta
   if (params.voting_pool <= 0) return made;
   auto voted = table.vote(scene, background);
   if (voted.size() > static_cast<size_t>(params.voting_pool)) voted.resize(static_cast<size_t>(params.voting_pool));
-  const size_t min_support = static_cast<size_t>(std::ceil(params.pair_min_support * static_cast<double>(surface_support.sample_size())));
-  const std::vector<char> nothing_explained(scene.points.size(), 0);
+  const size_t min_support = surface_support.min_support(params.pair_min_support);
   for (const auto& v : voted) {
     PoseHypothesis h;
     h.T_scene_model = v.T_scene_model;
     h.voted = true;
-    h.first_support = h.support = surface_support(h.T_scene_model, 1.5 * res, nothing_explained);
+    h.first_support = h.support = surface_support.first(h.T_scene_model, 1.5 * res);
     if (h.support >= min_support) made.push_back(std::move(h));
   }
   return made;
