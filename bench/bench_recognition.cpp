@@ -154,6 +154,21 @@ cv::Mat to_cv(const PointCloud& c) {
   return m;
 }
 
+// OpenCV's pose as ours.
+Transform to_transform(const cv::ppf_match_3d::Pose3DPtr& pose) {
+  Transform T = Transform::Identity();
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) T.matrix()(r, c) = pose->pose(r, c);
+  return T;
+}
+
+// The detector's relativeSceneDistance for a resampling step of `step_m`: match() resamples the
+// scene at that share of each axis's extent of the scene (not of the model), so the share of the
+// largest extent keeps the step.
+double relative_scene_step(const PointCloud& scene, double step_m) {
+  return step_m / std::max(1e-9, double(scene.bounds().sizes().maxCoeff()));
+}
+
 // Symmetry-aware surface distance: model points at the found pose T, expressed in the model
 // frame at the true pose, against the model's own surface points (BOP MSSD at 10% of the diameter).
 bool symmetric_match(const ModelData& m, const Transform& truth, const Transform& T) {
@@ -326,11 +341,9 @@ int main(int argc, char** argv) {
         if (n.dot(-p.normalized()) > 0.1f) half.points.push_back(p), half.normals.push_back(n);
       }
       std::vector<cv::ppf_match_3d::Pose3DPtr> poses;
-      m.ppf->match(to_cv(half), poses, 1.0 / 5.0, ppf_sampling * m.diameter / double(half.bounds().sizes().maxCoeff()));
+      m.ppf->match(to_cv(half), poses, 1.0 / 5.0, relative_scene_step(half, ppf_sampling * m.diameter));
       if (poses.empty()) continue;
-      Transform F = Transform::Identity();
-      for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) F.matrix()(r, c) = poses.front()->pose(r, c);
+      const Transform F = to_transform(poses.front());
       const bool found = symmetric_match(m, T, F);
       std::fprintf(stderr, "point-pair self-check %s: best of %zu poses %zu votes, %.1f mm from the true pose, %s\n", m.name.c_str(), poses.size(),
                    poses.front()->numVotes, 1e3 * (F.translation() - T.translation()).norm(), found ? "found" : "missed");
@@ -394,9 +407,8 @@ int main(int argc, char** argv) {
         bool matched = false;
         for (const auto& inst : truth) matched |= inst.model == i.model && symmetric_match(*by_name.at(i.model), inst.T_sensor_object, i.T_scene_model);
         if (matched)
-          std::fprintf(stderr, "  found %s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f\n",
-                       i.model.c_str(), i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction,
-                       i.continued_fraction);
+          std::fprintf(stderr, "  found %s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f\n", i.model.c_str(),
+                       i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction, i.continued_fraction);
         else {
           double nearest = 1e9, angle = 0;
           Eigen::Vector3d axis = Eigen::Vector3d::Zero();  // of the turn from the instance, in its model frame
@@ -481,14 +493,12 @@ int main(int argc, char** argv) {
             scene_samples.points.push_back(all.points[i]), scene_samples.normals.push_back(all.normals[i]);
       }
       const cv::Mat scene_cloud = to_cv(scene_samples);
-      // match() resamples the scene again, at its relativeSceneDistance times each axis's extent
-      // of the scene (not of the model): that share of the largest extent keeps the step.
-      const double scene_relative = ppf_step / std::max(1e-9, double(scene_samples.bounds().sizes().maxCoeff()));
+      const double scene_step = relative_scene_step(scene_samples, ppf_step);
       std::vector<Detection> theirs;
       t0 = Clock::now();
       for (auto& m : models) {
         std::vector<cv::ppf_match_3d::Pose3DPtr> poses;
-        m.ppf->match(scene_cloud, poses, 1.0 / 5.0, scene_relative);
+        m.ppf->match(scene_cloud, poses, 1.0 / 5.0, scene_step);
         if (poses.empty()) continue;
         const size_t best = poses.front()->numVotes;
         std::vector<cv::ppf_match_3d::Pose3DPtr> top;
@@ -498,9 +508,7 @@ int main(int argc, char** argv) {
         icp.registerModelToScene(m.ppf_cloud, scene_cloud, top);
         int accepted = 0;
         for (const auto& p : top) {
-          Transform T = Transform::Identity();
-          for (int r = 0; r < 4; ++r)
-            for (int c = 0; c < 4; ++c) T.matrix()(r, c) = p->pose(r, c);
+          const Transform T = to_transform(p);
           if (diagnose) {
             bool right = false;
             for (const auto& inst : truth) right |= inst.model == m.name && symmetric_match(m, inst.T_sensor_object, T);
