@@ -441,37 +441,71 @@ class BlockCache {
   void reserve(size_t bytes) { reserved_ += bytes; }
   void release(size_t bytes) { reserved_ -= std::min(reserved_, bytes); }
 
+  // Stores the dirty ones of `blocks` (resident) in order, then calls done(it) for each of
+  // `blocks`. Encoding runs on every thread, a few blocks per thread at a time (the encoded bytes
+  // in memory stay bounded); the store serves one thread at a time. When the store throws, the
+  // blocks not yet done stay resident and dirty.
+  template <typename Done>
+  void store_dirty(const std::vector<std::list<BlockKey>::iterator>& blocks, Done done) {
+    const size_t group = 2 * static_cast<size_t>(omp_get_max_threads());
+    std::vector<std::vector<uint8_t>> bytes(group);
+    for (size_t first = 0; first < blocks.size(); first += group) {
+      const size_t count = std::min(group, blocks.size() - first);
+      std::exception_ptr error;
+#pragma omp parallel for schedule(dynamic, 1) if (count > 1)
+      for (size_t j = 0; j < count; ++j) {
+        try {
+          const Block& b = *blocks_.find(*blocks[first + j])->second;
+          bytes[j] = b.dirty ? encode_block(b, shape_) : std::vector<uint8_t>{};
+        } catch (...) {
+#pragma omp critical(artisan_grid_encode)
+          if (!error) error = std::current_exception();
+        }
+      }
+      if (error) std::rethrow_exception(error);
+      for (size_t j = 0; j < count; ++j) {
+        const auto it = blocks[first + j];
+        if (blocks_.find(*it)->second->dirty) {
+          store_.store(*it, bytes[j]);
+          ++stats_.stores;
+        }
+        done(it);
+      }
+    }
+  }
+
   // Evicts unpinned blocks, least recently used first, until `needed` more bytes (beyond the
   // reservations) fit the budget; dirty ones are stored first.
   void make_room(size_t needed) {
-    auto it = lru_.end();
-    while (stats_.resident_bytes + reserved_ + needed > def_.memory_budget_bytes && it != lru_.begin()) {
+    std::vector<std::list<BlockKey>::iterator> victims;
+    size_t freed = 0;
+    for (auto it = lru_.end(); stats_.resident_bytes + reserved_ + needed > def_.memory_budget_bytes + freed && it != lru_.begin();) {
       --it;
-      auto found = blocks_.find(*it);
-      Block* b = found->second.get();
+      const Block* b = blocks_.find(*it)->second.get();
       if (b->pins > 0) continue;
-      if (b->dirty) {
-        store_.store(*it, encode_block(*b, shape_));
-        ++stats_.stores;
-      }
+      victims.push_back(it);
+      freed += b->accounted;
+    }
+    store_dirty(victims, [&](std::list<BlockKey>::iterator it) {
+      Block* b = blocks_.find(*it)->second.get();
       stored_[*it] = b->accounted;
       account(-static_cast<int64_t>(b->accounted));
       ++stats_.evictions;
-      blocks_.erase(found);
-      it = lru_.erase(it);
-    }
+      blocks_.erase(*it);
+      lru_.erase(it);
+    });
   }
 
   void flush() {
-    for (auto& [key, b] : blocks_) {
-      if (!b->dirty) continue;
-      store_.store(key, encode_block(*b, shape_));
-      ++stats_.stores;
+    std::vector<std::list<BlockKey>::iterator> dirty;
+    for (auto it = lru_.begin(); it != lru_.end(); ++it)
+      if (blocks_.find(*it)->second->dirty) dirty.push_back(it);
+    store_dirty(dirty, [&](std::list<BlockKey>::iterator it) {
+      Block* b = blocks_.find(*it)->second.get();
       b->dirty = false;
-      stored_[key] = b->accounted;
-    }
+      stored_[*it] = b->accounted;
+    });
   }
-
   // Every block with data, sorted: the store's and the resident ones.
   std::vector<BlockKey> keys() {
     std::vector<BlockKey> out = store_.keys();
