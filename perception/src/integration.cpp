@@ -506,6 +506,7 @@ class BlockCache {
       stored_[*it] = b->accounted;
     });
   }
+
   // Every block with data, sorted: the store's and the resident ones.
   std::vector<BlockKey> keys() {
     std::vector<BlockKey> out = store_.keys();
