@@ -282,7 +282,6 @@ int main(int argc, char** argv) {
       else if (k == "pair_step_fraction") library_params.pair_step_fraction = v;
       else if (k == "coarse_refined") tuned.coarse_refined = int(v);
       else if (k == "max_instances") tuned.max_instances = int(v);
-      else if (k == "max_candidates_verified") tuned.max_candidates_verified = int(v);
       else if (k == "max_continued_fraction") tuned.max_continued_fraction = v;
       else {
         std::cerr << "bench_recognition: unknown parameter " << k << "\n";

@@ -124,9 +124,7 @@ TEST_F(GridCli, MergeMultiMeshMatchesStanfordReconstruction) {
   for (const auto& s : kScans) {
     auto m = ws.load_mesh(ws.resolve("/b/" + s + "-mesh").id);
     m.transform(T_world(s));
-    const int offset = static_cast<int>(scans.vertices.size());
-    scans.vertices.insert(scans.vertices.end(), m.vertices.begin(), m.vertices.end());
-    for (const auto& f : m.faces) scans.faces.emplace_back(f[0] + offset, f[1] + offset, f[2] + offset);
+    scans.append(m);
   }
   const double covered = test::surface_within(reference, scans, 0.001, 0.0002);
   std::printf("merge of 3 scans at 0.5 mm: %zu faces, accuracy %.4f, completeness %.4f (the scans cover %.4f)\n",

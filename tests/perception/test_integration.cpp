@@ -79,9 +79,7 @@ TEST(Integration, BunnyTenScansMatchStanfordReconstruction) {
   for (const auto& s : bunny_scans()) {
     auto m = s.mesh_scan;
     m.transform(s.T_world_scan);
-    const int offset = static_cast<int>(scans.vertices.size());
-    scans.vertices.insert(scans.vertices.end(), m.vertices.begin(), m.vertices.end());
-    for (const auto& f : m.faces) scans.faces.emplace_back(f[0] + offset, f[1] + offset, f[2] + offset);
+    scans.append(m);
   }
   const double covered = test::surface_within(bunny_reference(), scans, 0.001, 0.0002);
   std::printf("the scans cover %.5f of the reference, the merge %.5f\n", covered, a.completeness_1mm);
@@ -181,9 +179,9 @@ TEST(Integration, SphereFromSyntheticRangeImageLiesOnTheSphere) {
 // Method: the same sphere seen by one camera; at a voxel, the likelihood of a single view is about
 // its view cosine, so the extracted surface must be the cap where the view cosine reaches
 // min_likelihood: its area (analytic, from the camera's distance to the centre) 85-105% of that
-// cap, 99% of it in one connected piece. Before cells were judged by their likeliest corner, a surface crossing
-// cells diagonally was cut wherever a corner fell below the threshold (at 1 mm voxels this view
-// kept 57 of the cap's 302 cm2, in 499 pieces).
+// cap, 99% of it in one connected piece. Before cells were judged by their likeliest corner, a
+// surface crossing cells diagonally was cut wherever a corner fell below the threshold (at 1 mm
+// voxels this view kept 57 of the cap's 302 cm2, in 499 pieces).
 TEST(Integration, SingleViewSurfaceCoversTheCapItsViewCosinesReach) {
   test::AnalyticScene scene;
   const Eigen::Vector3d centre(0.02, -0.01, 0.5);
@@ -201,9 +199,10 @@ TEST(Integration, SingleViewSurfaceCoversTheCapItsViewCosinesReach) {
     double lo = radius / d, hi = 1;
     for (int it = 0; it < 60; ++it) (view_cosine(0.5 * (lo + hi)) < min_l ? lo : hi) = 0.5 * (lo + hi);
     const double cap = 2 * M_PI * radius * radius * (1 - hi);
-    double area = 0;
-    for (const auto& f : merged.mesh.faces)
-      area += 0.5 * (merged.mesh.vertices[f[1]] - merged.mesh.vertices[f[0]]).cross(merged.mesh.vertices[f[2]] - merged.mesh.vertices[f[0]]).norm();
+    const auto& v = merged.mesh.vertices;
+    std::vector<double> face_area;
+    for (const auto& f : merged.mesh.faces) face_area.push_back(0.5 * (v[f[1]] - v[f[0]]).cross(v[f[2]] - v[f[0]]).norm());
+    const double area = std::accumulate(face_area.begin(), face_area.end(), 0.0);
     std::vector<int> parent(merged.mesh.vertices.size());
     std::iota(parent.begin(), parent.end(), 0);
     auto find = [&](int x) {
@@ -215,8 +214,7 @@ TEST(Integration, SingleViewSurfaceCoversTheCapItsViewCosinesReach) {
       parent[find(f[2])] = find(f[0]);
     }
     std::map<int, double> pieces;  // area per connected piece
-    for (const auto& f : merged.mesh.faces)
-      pieces[find(f[0])] += 0.5 * (merged.mesh.vertices[f[1]] - merged.mesh.vertices[f[0]]).cross(merged.mesh.vertices[f[2]] - merged.mesh.vertices[f[0]]).norm();
+    for (size_t i = 0; i < face_area.size(); ++i) pieces[find(merged.mesh.faces[i][0])] += face_area[i];
     double largest = 0;
     for (const auto& [root, a] : pieces) largest = std::max(largest, a);
     std::printf("voxel %.3f m: %.1f cm2 extracted (largest piece %.1f cm2 of %zu), cap with view cosine >= %.2f %.1f cm2\n",

@@ -3,9 +3,8 @@
 // seen by its own synthetic 320 x 240 pinhole camera, are distributed into a 1 mm grid whose
 // blocks live in files (not in this process's memory) under a 12 MiB budget; the grid grows
 // several times larger than the budget. The peak RSS (VmHWM) must stay within the RSS before
-// the run plus the budget plus a fixed overhead (inputs, splats, allocator slack) and twice
-// times the output mesh,
-// and the extracted surface must equal the one from an unlimited in-memory grid.
+// the run plus the budget plus a fixed overhead (inputs, splats, allocator slack) plus twice the
+// output mesh, and the extracted surface must equal the one from an unlimited in-memory grid.
 #include <gtest/gtest.h>
 
 #include <fstream>
