@@ -1,6 +1,7 @@
 #include "artisan/perception/recognition.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -84,7 +85,7 @@ class FreeSpace {
   ///    the object cannot be);
   ///  - occluded when something the sensor saw lies in front of it: no evidence either way, so it
   ///    counts neither for nor against.
-  Check check(const PointCloud& model, const Transform& T) const {
+  Check check(const PointCloud& model, const Transform& T, bool silhouette = true) const {
     Check c;
     if (maps_.empty()) return c;
     std::vector<Eigen::Vector3d> p(model.points.size()), n(model.points.size());
@@ -151,7 +152,7 @@ class FreeSpace {
     // continued when a scene point within 3 resolutions, off the model (farther than 1.5
     // resolutions from all its points), lies on its tangent plane (within half a resolution)
     // with a normal within 25 degrees of its own.
-    if (did) {
+    if (did && silhouette) {
       std::vector<char> on_model(scene_.points.size(), 0);
       std::vector<size_t> around;
       for (size_t i = 0; i < p.size(); ++i) {
@@ -423,6 +424,102 @@ std::vector<PoseHypothesis> best_distinct(std::vector<PoseHypothesis> made, cons
   return out;
 }
 
+// A point of the line parallel to `direction` that the model's normals point at most: the axis
+// of a surface of revolution (every normal of one meets its axis), found robustly for parts that
+// are one only in part (a valve's body and ends about their run, but not its stem). Least squares
+// over the normal lines projected on the plane across `direction`, reweighted (Cauchy, a twentieth
+// of the model's size) so that the normals of other pieces drop out; starts at `start`.
+Eigen::Vector3d near_symmetry_axis(const PointCloud& model, const Eigen::Vector3d& start, const Eigen::Vector3d& direction) {
+  const Eigen::Vector3d d = direction.normalized();
+  const Eigen::Matrix3d across = Eigen::Matrix3d::Identity() - d * d.transpose();
+  const double scale2 = std::pow(0.05 * static_cast<double>(model.bounds().diagonal().norm()), 2);
+  Eigen::Vector3d c = start;
+  for (int iteration = 0; iteration < 10; ++iteration) {
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    for (size_t i = 0; i < model.points.size(); ++i) {
+      const Eigen::Vector3d n = across * model.normals[i].cast<double>();
+      const double length2 = n.squaredNorm();
+      if (length2 < 0.25) continue;  // normals along the axis say nothing about where it is
+      const Eigen::Vector3d u = n / std::sqrt(length2);
+      const Eigen::Matrix3d off_line = across - u * u.transpose();  // to the normal's line, across the axis
+      const Eigen::Vector3d p = model.points[i].cast<double>();
+      const double w = 1.0 / (1.0 + (off_line * (c - p)).squaredNorm() / scale2);
+      A += w * off_line;
+      b += w * off_line * p;
+    }
+    // A is singular along the axis: a small pull towards the current point fixes that.
+    const Eigen::Vector3d next = (A + 1e-9 * d * d.transpose()).ldlt().solve(b + 1e-9 * d * d.dot(c));
+    if (!next.allFinite()) break;
+    const bool settled = (next - c).norm() < 1e-6;
+    c = next;
+    if (settled) break;
+  }
+  return c;
+}
+
+// The model's principal directions (of its points' covariance), each with a point of the axis
+// along it that the surface is most nearly one of revolution about.
+struct TurnAxes {
+  Eigen::Matrix3d directions;  ///< columns
+  std::array<Eigen::Vector3d, 3> points;
+};
+TurnAxes turn_axes(const PointCloud& model) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& p : model.points) mean += p.cast<double>();
+  mean /= static_cast<double>(std::max<size_t>(model.points.size(), 1));
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  for (const auto& p : model.points) covariance += (p.cast<double>() - mean) * (p.cast<double>() - mean).transpose();
+  TurnAxes axes;
+  axes.directions = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance).eigenvectors();
+  for (int a = 0; a < 3; ++a) axes.points[static_cast<size_t>(a)] = near_symmetry_axis(model, mean, axes.directions.col(a));
+  return axes;
+}
+
+// A pose of the model turned from T_scene_model about one of its turn axes (RecognitionParams::
+// turn_steps) that passes every test (`passes`, `taken`) and puts more of the model on the scene,
+// less its share in free space, by turn_margin; the best one, refined, or none. `coarse_overlap`
+// is the overlap the coarse ICP gives from T_scene_model.
+struct Turned {
+  IcpResult icp;
+  FreeSpace::Check seen;
+};
+template <typename Passes, typename Taken>
+std::optional<Turned> better_turn(const PointCloud& model, const TurnAxes& axes, const Transform& T_scene_model, double score, const PointCloud& scene,
+                                  const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& coarse, const IcpSettings& fine,
+                                  const RecognitionParams& params, const Passes& passes, const Taken& taken) {
+  if (params.turn_steps < 2) return std::nullopt;
+  const auto steps = static_cast<size_t>(params.turn_steps);
+  std::vector<Turned> turned(3 * (steps - 1));
+  // Coarse ICP from every turn; the few that put most of the model on the scene, and more than
+  // the coarse ICP does from the pose itself, are refined and checked.
+  const double coarse_overlap = icp_point_to_plane(model, scene, scene_tree, T_scene_model, coarse).overlap_fraction;
+#pragma omp parallel for schedule(dynamic, 1)
+  for (size_t k = 0; k < turned.size(); ++k) {
+    const size_t a = k / (steps - 1);
+    const double angle = 2 * std::numbers::pi * static_cast<double>(k % (steps - 1) + 1) / static_cast<double>(steps);
+    const Transform T = T_scene_model * Eigen::Translation3d(axes.points[a]) *
+                        Eigen::AngleAxisd(angle, axes.directions.col(static_cast<Eigen::Index>(a))) * Eigen::Translation3d(-axes.points[a]);
+    turned[k].icp = icp_point_to_plane(model, scene, scene_tree, T, coarse);
+  }
+  std::erase_if(turned, [&](const Turned& t) { return t.icp.overlap_fraction <= coarse_overlap + params.turn_margin; });
+  std::sort(turned.begin(), turned.end(), [](const Turned& a, const Turned& b) { return a.icp.overlap_fraction > b.icp.overlap_fraction; });
+  if (turned.size() > 3) turned.resize(3);
+  std::vector<char> ok(turned.size(), 0);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (size_t k = 0; k < turned.size(); ++k) {
+    turned[k].icp = icp_point_to_plane(model, scene, scene_tree, turned[k].icp.T_target_source, fine);
+    turned[k].seen = free_space.check(model, turned[k].icp.T_target_source);
+    ok[k] = passes(turned[k].icp, turned[k].seen);
+  }
+  std::optional<Turned> best;
+  for (size_t k = 0; k < turned.size(); ++k) {
+    const double s = turned[k].icp.overlap_fraction - turned[k].seen.free_space;
+    if (ok[k] && s > score + params.turn_margin && !taken(turned[k].icp.T_target_source)) score = s, best = turned[k];
+  }
+  return best;
+}
+
 }  // namespace
 
 struct SpinImageLibrary::SearchIndex {
@@ -637,6 +734,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   std::vector<std::vector<size_t>> support;  // per instance: the scene points it explains
   for (size_t m = 0; m < library.model_count(); ++m) {
     const PointCloud& model = library.model_points(m);
+    const TurnAxes axes = turn_axes(model);
     auto candidates = per_model[m];
     std::vector<char> explained(scene_points.points.size(), 0);
     const SurfaceSupport surface_support(model, params.pair_score_points, scene_points, scene_tree);
@@ -717,38 +815,64 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         }
         verified = std::move(distinct);
       }
+      // What something hid is not held against the overlap either; but what is seen must be more
+      // than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
+      const auto passes = [&](const IcpResult& icp, const FreeSpace::Check& seen) {
+        return icp.overlap_fraction >= params.min_model_overlap * (1 - seen.occluded) && icp.rmse_m <= params.max_rmse_factor * res &&
+               seen.free_space <= params.max_free_space_fraction && seen.explained >= params.min_visible_explained &&
+               seen.planarity <= params.max_support_planarity && seen.continued <= params.max_continued_fraction;
+      };
+      // A pose the ICP brought back onto an instance already accepted (from a start on the surface
+      // around it) is that instance again: more than max_shared_support of the scene surface it
+      // lies on is explained already.
+      const auto on_accepted = [&](const Transform& T_scene_model) {
+        if (instance == 0) return false;
+        const Eigen::Isometry3f T = T_scene_model.cast<float>();
+        std::vector<size_t> near;
+        std::vector<char> counted(scene_points.points.size(), 0);
+        size_t on = 0, taken = 0;
+        for (const auto& p : model.points) {
+          scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
+          for (const size_t s : near)
+            if (!counted[s]) counted[s] = 1, ++on, taken += explained[s];
+        }
+        return static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on);
+      };
       // In score order, the first pose that passes the fine ICP and the free-space test wins.
+      // With a prescreen, a coarse pose that is far from passing the tests already (by
+      // prescreen_slack) is not refined: it does not use up one of the poses verified.
+      const double slack = params.prescreen_slack;
       Verified* winner = nullptr;
-      for (int tried = 0; tried < std::min<int>(params.max_candidates_verified, static_cast<int>(verified.size())); ++tried) {
-        auto& v = verified[static_cast<size_t>(tried)];
+      int tried = 0;
+      for (auto& v : verified) {
+        if (tried >= params.max_candidates_verified) break;
+        if (slack >= 0) {
+          const auto pre = free_space.check(model, v.T, false);
+          if (v.icp.overlap_fraction < (1 - slack) * params.min_model_overlap * (1 - pre.occluded) || pre.free_space > params.max_free_space_fraction + slack ||
+              pre.explained < params.min_visible_explained - slack || pre.planarity > params.max_support_planarity + slack) {
+            if (v.origin) v.origin->done = true;
+            continue;
+          }
+        }
+        ++tried;
         v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
         v.T = v.icp.T_target_source;
         const auto& seen = v.seen.emplace(free_space.check(model, v.T));
         if (v.origin) v.origin->done = true;
-        // What something hid is not held against the overlap either; but what is seen must be
-        // more than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
-        if (v.icp.overlap_fraction < params.min_model_overlap * (1 - seen.occluded) || v.icp.rmse_m > params.max_rmse_factor * res ||
-            seen.free_space > params.max_free_space_fraction || seen.explained < params.min_visible_explained ||
-            seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction)
-          continue;
-        // A pose the ICP brought back onto an instance already accepted (from a start on the
-        // surface around it) is that instance again: refused when more than max_shared_support
-        // of the scene surface it lies on is explained already.
-        if (instance > 0) {
-          const Eigen::Isometry3f T = v.T.cast<float>();
-          std::vector<size_t> near;
-          std::vector<char> counted(scene_points.points.size(), 0);
-          size_t on = 0, taken = 0;
-          for (const auto& p : model.points) {
-            scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
-            for (const size_t s : near)
-              if (!counted[s]) counted[s] = 1, ++on, taken += explained[s];
-          }
-          if (static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on)) continue;
-        }
+        if (!passes(v.icp, seen) || on_accepted(v.T)) continue;
         winner = &v;
         break;
       }
+      // A part whose distinguishing piece is small (a valve's stem and hand wheel, a tee's
+      // branch) also fits the scene with its large, nearly symmetric body (the run) turned about
+      // its axis and the piece where nothing contradicts it: the winner's turns compete with it.
+      if (winner)
+        if (const auto turn = better_turn(model, axes, winner->T, winner->icp.overlap_fraction - winner->seen->free_space, scene_points, scene_tree,
+                                          free_space, coarse, fine, params, passes, on_accepted)) {
+          winner->icp = turn->icp;
+          winner->T = turn->icp.T_target_source;
+          winner->seen = turn->seen;
+        }
       if (params.keep_candidates)
         for (size_t k = 0; k < verified.size(); ++k) {
           const auto& v = verified[k];

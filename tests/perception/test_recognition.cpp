@@ -2,13 +2,14 @@
 // frame) found in each of the ten real bunny scans at the pose bun.conf gives; not found in a
 // simulated scan of a pipework cell that holds no bunny; compressed and full search agree; a
 // half-hidden tee found; pipework found from pairs of ambiguous matches; a face flush with a
-// larger surface is no instance.
+// larger surface is no instance; a valve found turned about its run is turned back.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <numbers>
 
@@ -16,6 +17,7 @@
 
 #include "artisan/core/error.hpp"
 #include "artisan/core/io/ply.hpp"
+#include "artisan/core/io/range_image_format.hpp"
 #include "artisan/core/io/stanford_conf.hpp"
 #include "artisan/perception/kdtree.hpp"
 #include "artisan/perception/meshing.hpp"
@@ -158,6 +160,15 @@ TEST(Recognition, AnInstanceHalfHiddenBehindAnotherObjectIsFound) {
               d.translation().norm() * 1e3, deg, found.visible_explained, found.occluded_fraction, found.free_space_fraction);
 }
 
+// BOP's MSSD: the largest distance of the model's surface points at pose T from its surface at
+// the true pose (a symmetric part turned onto itself is at distance 0).
+float surface_distance(const PointCloud& surface, const KdTree3& tree, const Transform& truth, const Transform& T) {
+  const Transform e = truth.inverse() * T;
+  float worst = 0;
+  for (const auto& p : surface.points) worst = std::max(worst, std::sqrt(tree.nearest((e * p.cast<double>()).cast<float>()).second));
+  return worst;
+}
+
 // Pipes and fittings are nearly surfaces of revolution: a scene point's spin image matches many
 // model points equally well, and its right model point is rarely the nearest. Method: a 350 mm
 // pipe and an elbow dropped on a table, seen by a simulated Vivid; recognized with one source of
@@ -189,15 +200,11 @@ void expect_pipework_found(RecognitionParams params) {
     const Transform T_sensor_object = acquisition.truth.T_world_sensor.inverse() * truth.T_world_object;
     const PointCloud& surface = surfaces.at(name);
     const KdTree3 tree(surface.points);
-    Eigen::AlignedBox3f box;
-    for (const auto& p : surface.points) box.extend(p);
-    const float diameter = box.diagonal().norm();
+    const float diameter = surface.bounds().diagonal().norm();
     int found = 0;
     for (const auto& inst : result.instances) {
       if (inst.model != name) continue;
-      const Transform e = T_sensor_object.inverse() * inst.T_scene_model;
-      float worst = 0;
-      for (const auto& p : surface.points) worst = std::max(worst, std::sqrt(tree.nearest((e * p.cast<double>()).cast<float>()).second));
+      const float worst = surface_distance(surface, tree, T_sensor_object, inst.T_scene_model);
       found += worst < 0.1f * diameter;
       std::printf("%s (visible %.2f): found, surface distance at most %.1f mm\n", name, truth.visible_fraction, worst * 1e3);
     }
@@ -282,6 +289,50 @@ TEST(Recognition, BadInputThrows) {
   SpinImageLibrary lib;
   lib.add_model("bunny", scan_mesh("bun000"));
   EXPECT_THROW(lib.add_model("bunny", scan_mesh("bun000")), Error);  // duplicate name
+}
+
+// A valve's body and ends are nearly a surface of revolution about its run; only its stem and
+// hand wheel say how far it is turned about it. Method: bench_recognition's scene 9
+// (data/recognition/clutter-scene9: eight parts and distractors piled on a table, one simulated
+// Vivid view), where the valve is 1% occluded. Without the turn search (turn_steps 0) the valve
+// is "found" turned 127.5 degrees about its run, the wheel where nothing contradicts it - which
+// this test expects, so that the scene keeps testing the search; with it, the valve must be found
+// at its pose (MSSD within 10% of its diameter; its half turn about the stem is a symmetry).
+TEST(Recognition, AValveFoundTurnedAboutItsRunIsTurnedBack) {
+  const auto dir = test::data_dir() / "recognition" / "clutter-scene9";
+  const TriangleMesh scene = mesh_range_image(io::read_range_image(dir / "range.ari")).mesh;
+  const auto truth = nlohmann::json::parse(std::ifstream(dir / "truth.json"));
+  const auto matrix = [](const nlohmann::json& v) {
+    Transform T = Transform::Identity();
+    for (int k = 0; k < 16; ++k) T.matrix()(k / 4, k % 4) = v.at(static_cast<size_t>(k)).get<double>();
+    return T;
+  };
+  Transform T_sensor_valve = Transform::Identity();
+  for (const auto& o : truth.at("objects"))
+    if (o.at("name") == "valve#1") T_sensor_valve = matrix(truth.at("T_world_sensor")).inverse() * matrix(o.at("T_world_object"));
+  const auto path = test::data_dir() / "workcells" / "models" / "valve.ply";
+  const auto mesh = io::ply_to_mesh(io::read_ply(path), path);
+  SpinImageLibrary library;
+  library.add_model("valve", mesh);
+  const PointCloud surface = sample_surface(mesh, 0.002);
+  const KdTree3 tree(surface.points);
+  const float diameter = surface.bounds().diagonal().norm();
+
+  RecognitionParams params;
+  params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
+  for (const int turn_steps : {0, params.turn_steps}) {
+    params.turn_steps = turn_steps;
+    const auto result = recognize(scene, library, params);
+    float nearest = std::numeric_limits<float>::infinity();
+    for (const auto& inst : result.instances) nearest = std::min(nearest, surface_distance(surface, tree, T_sensor_valve, inst.T_scene_model));
+    std::printf("turn steps %d: %zu valves, the nearest %.1f mm (MSSD) from the true pose\n", turn_steps, result.instances.size(), nearest * 1e3);
+    if (turn_steps == 0) {
+      EXPECT_GT(nearest, 0.1f * diameter) << "found without the turn search: the scene no longer tests it";
+    } else {
+      EXPECT_LT(nearest, 0.1f * diameter) << "the valve was not found at its pose";
+      EXPECT_EQ(result.instances.size(), 1u);
+    }
+  }
 }
 
 }  // namespace

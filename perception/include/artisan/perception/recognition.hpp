@@ -125,7 +125,11 @@ struct RecognitionParams {
   /// pair hypotheses each: those that put the most sampled model points on scene surface not yet
   /// explained
   int coarse_refined = 30;
-  double min_model_overlap = 0.15;     ///< [1] share of the model's points that must lie on the scene (less the share occluded)
+  /// [1] share of the model's points that must lie on the scene (less the share occluded). Low:
+  /// a tee seen along its branch shows a tenth of its surface even when nothing hides it (0.07
+  /// to 0.11 in the clutter bench); whether what a sensor should see of it is there is
+  /// min_visible_explained's test.
+  double min_model_overlap = 0.10;
   /// [1] largest accepted residual, in resolutions. True instances in the simulated clutter bench
   /// fit within 0.6 mm (0.2 resolutions); a pipe fitted to another part's or a distractor's
   /// cylinder of a slightly different radius leaves 1.0-1.3 mm.
@@ -154,7 +158,16 @@ struct RecognitionParams {
   /// plane the scene continues beyond the model's outline (no silhouette there: the model's
   /// face lies flush on a larger surface, such as a flange's face on a box's).
   double max_continued_fraction = 0.03;
+  /// [1] an accepted pose is also tried turned about each of the model's principal directions
+  /// (through the axis its surface is most nearly one of revolution about) by every multiple of
+  /// 360/turn_steps degrees; a turn that passes every test and puts more of the model on the
+  /// scene, less its share in free space, replaces it (0 or 1: no turns). A valve's body and
+  /// ends, or a tee's run, fit the scene at any turn about their axis, with the stem or branch
+  /// where nothing contradicts it.
+  int turn_steps = 12;
+  double turn_margin = 0.01;           ///< [1] by how much more (overlap, less free-space share)
   int max_candidates_verified = 5;     ///< [1] poses tried in score order per instance before giving up
+  double prescreen_slack = -1;         ///< [1] see recognize(); negative: no prescreen
   bool keep_candidates = false;        ///< fill RecognitionResult::candidates (diagnosis)
 };
 
