@@ -257,7 +257,6 @@ int main(int argc, char** argv) {
       else if (k == "max_groups") tuned.max_groups = int(v);
       else if (k == "max_candidates_verified") tuned.max_candidates_verified = int(v);
       else if (k == "turn_steps") tuned.turn_steps = int(v);
-      else if (k == "prescreen_slack") tuned.prescreen_slack = v;
       else if (k == "turn_margin") tuned.turn_margin = v;
       else if (k == "min_correlation") tuned.min_correlation = v;
       else if (k == "max_matches_grouped") tuned.max_matches_grouped = size_t(v);

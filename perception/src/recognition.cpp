@@ -85,7 +85,7 @@ class FreeSpace {
   ///    the object cannot be);
   ///  - occluded when something the sensor saw lies in front of it: no evidence either way, so it
   ///    counts neither for nor against.
-  Check check(const PointCloud& model, const Transform& T, bool silhouette = true) const {
+  Check check(const PointCloud& model, const Transform& T) const {
     Check c;
     if (maps_.empty()) return c;
     std::vector<Eigen::Vector3d> p(model.points.size()), n(model.points.size());
@@ -152,7 +152,7 @@ class FreeSpace {
     // continued when a scene point within 3 resolutions, off the model (farther than 1.5
     // resolutions from all its points), lies on its tangent plane (within half a resolution)
     // with a normal within 25 degrees of its own.
-    if (did && silhouette) {
+    if (did) {
       std::vector<char> on_model(scene_.points.size(), 0);
       std::vector<size_t> around;
       for (size_t i = 0; i < p.size(); ++i) {
@@ -839,22 +839,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         return static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on);
       };
       // In score order, the first pose that passes the fine ICP and the free-space test wins.
-      // With a prescreen, a coarse pose that is far from passing the tests already (by
-      // prescreen_slack) is not refined: it does not use up one of the poses verified.
-      const double slack = params.prescreen_slack;
       Verified* winner = nullptr;
-      int tried = 0;
-      for (auto& v : verified) {
-        if (tried >= params.max_candidates_verified) break;
-        if (slack >= 0) {
-          const auto pre = free_space.check(model, v.T, false);
-          if (v.icp.overlap_fraction < (1 - slack) * params.min_model_overlap * (1 - pre.occluded) || pre.free_space > params.max_free_space_fraction + slack ||
-              pre.explained < params.min_visible_explained - slack || pre.planarity > params.max_support_planarity + slack) {
-            if (v.origin) v.origin->done = true;
-            continue;
-          }
-        }
-        ++tried;
+      for (int tried = 0; tried < std::min<int>(params.max_candidates_verified, static_cast<int>(verified.size())); ++tried) {
+        auto& v = verified[static_cast<size_t>(tried)];
         v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
         v.T = v.icp.T_target_source;
         const auto& seen = v.seen.emplace(free_space.check(model, v.T));

@@ -167,7 +167,6 @@ struct RecognitionParams {
   int turn_steps = 12;
   double turn_margin = 0.01;           ///< [1] by how much more (overlap, less free-space share)
   int max_candidates_verified = 5;     ///< [1] poses tried in score order per instance before giving up
-  double prescreen_slack = -1;         ///< [1] see recognize(); negative: no prescreen
   bool keep_candidates = false;        ///< fill RecognitionResult::candidates (diagnosis)
 };
 
