@@ -477,9 +477,9 @@ TurnAxes turn_axes(const PointCloud& model) {
 }
 
 // A pose of the model turned from T_scene_model about one of its turn axes (RecognitionParams::
-// turn_steps) that passes every test (`passes`, `taken`) and puts more of the model on the scene,
-// less its share in free space, by turn_margin; the best one, refined, or none. `coarse_overlap`
-// is the overlap the coarse ICP gives from T_scene_model.
+// turn_steps) that passes every test (`passes`, and not on an accepted instance: `taken`) and
+// scores more than `score` (T_scene_model's own: the model's share on the scene, less its share
+// in free space) by turn_margin; the best one, refined, or none.
 struct Turned {
   IcpResult icp;
   FreeSpace::Check seen;
