@@ -22,6 +22,15 @@
 
 namespace artisan {
 
+namespace detail {
+// The model's principal directions (of its points' covariance), each with a point of the axis
+// along it that the surface is most nearly one of revolution about (RecognitionParams::turn_steps).
+struct TurnAxes {
+  Eigen::Matrix3d directions;  ///< columns
+  std::array<Eigen::Vector3d, 3> points;
+};
+}  // namespace detail
+
 namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
@@ -458,19 +467,14 @@ Eigen::Vector3d near_symmetry_axis(const PointCloud& model, const Eigen::Vector3
   return c;
 }
 
-// The model's principal directions (of its points' covariance), each with a point of the axis
-// along it that the surface is most nearly one of revolution about.
-struct TurnAxes {
-  Eigen::Matrix3d directions;  ///< columns
-  std::array<Eigen::Vector3d, 3> points;
-};
-TurnAxes turn_axes(const PointCloud& model) {
+// The model's turn axes.
+detail::TurnAxes find_turn_axes(const PointCloud& model) {
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   for (const auto& p : model.points) mean += p.cast<double>();
   mean /= static_cast<double>(std::max<size_t>(model.points.size(), 1));
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
   for (const auto& p : model.points) covariance += (p.cast<double>() - mean) * (p.cast<double>() - mean).transpose();
-  TurnAxes axes;
+  detail::TurnAxes axes;
   axes.directions = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance).eigenvectors();
   for (int a = 0; a < 3; ++a) axes.points[static_cast<size_t>(a)] = near_symmetry_axis(model, mean, axes.directions.col(a));
   return axes;
@@ -485,7 +489,7 @@ struct Turned {
   FreeSpace::Check seen;
 };
 template <typename Passes, typename Taken>
-std::optional<Turned> better_turn(const PointCloud& model, const TurnAxes& axes, const Transform& T_scene_model, double score, const PointCloud& scene,
+std::optional<Turned> better_turn(const PointCloud& model, const detail::TurnAxes& axes, const Transform& T_scene_model, double score, const PointCloud& scene,
                                   const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& coarse, const IcpSettings& fine,
                                   const RecognitionParams& params, const Passes& passes, const Taken& taken) {
   if (params.turn_steps < 2) return std::nullopt;
@@ -571,7 +575,7 @@ void SpinImageLibrary::add_precomputed_model(const std::string& name, PointCloud
     throw Error("spin-image library: precomputed model \"" + name + "\" has " + std::to_string(images.rows()) + " x " +
                 std::to_string(images.cols()) + " spin images for " + std::to_string(points.points.size()) + " points; expected " +
                 std::to_string(bins()) + " rows");
-  models_.push_back({name, std::move(points), std::move(images), {}, {}});
+  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}});
   compressed_ = false;
 }
 
@@ -599,6 +603,7 @@ void SpinImageLibrary::compress() {
   basis_ = eig.eigenvectors().rowwise().reverse().leftCols(k).cast<float>();
   for (auto& m : models_) {
     m.coefficients = project(m.images);
+    if (!m.turns) m.turns = std::make_shared<const detail::TurnAxes>(find_turn_axes(m.points));
     if (m.pairs) continue;
     detail::PairVotingParams voting;
     voting.step_m = std::max(params_.pair_min_step_factor * params_.resolution_m,
@@ -734,7 +739,6 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   std::vector<std::vector<size_t>> support;  // per instance: the scene points it explains
   for (size_t m = 0; m < library.model_count(); ++m) {
     const PointCloud& model = library.model_points(m);
-    const TurnAxes axes = turn_axes(model);
     auto candidates = per_model[m];
     std::vector<char> explained(scene_points.points.size(), 0);
     const SurfaceSupport surface_support(model, params.pair_score_points, scene_points, scene_tree);
@@ -854,7 +858,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       // branch) also fits the scene with its large, nearly symmetric body (the run) turned about
       // its axis and the piece where nothing contradicts it: the winner's turns compete with it.
       if (winner)
-        if (const auto turn = better_turn(model, axes, winner->T, winner->icp.overlap_fraction - winner->seen->free_space, scene_points, scene_tree,
+        if (const auto turn = better_turn(model, library.turn_axes(m), winner->T, winner->icp.overlap_fraction - winner->seen->free_space, scene_points, scene_tree,
                                           free_space, coarse, fine, params, passes, on_accepted)) {
           winner->icp = turn->icp;
           winner->T = turn->icp.T_target_source;

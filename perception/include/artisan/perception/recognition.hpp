@@ -18,6 +18,7 @@ namespace artisan {
 
 namespace detail {
 class PairFeatureModel;
+struct TurnAxes;
 }
 
 struct ModelLibraryParams {
@@ -60,6 +61,8 @@ class SpinImageLibrary {
   bool compressed() const { return compressed_; }
   /// Model m's point-pair-feature table (made by compress()).
   const detail::PairFeatureModel& pair_features(size_t m) const { return *models_[m].pairs; }
+  /// Model m's turn axes (RecognitionParams::turn_steps; made by compress()).
+  const detail::TurnAxes& turn_axes(size_t m) const { return *models_[m].turns; }
 
   struct Match {
     float d2;  ///< squared distance between normalised images (2 - 2 x correlation)
@@ -77,6 +80,7 @@ class SpinImageLibrary {
     Eigen::MatrixXf images;
     Eigen::MatrixXf coefficients;
     std::shared_ptr<const detail::PairFeatureModel> pairs;
+    std::shared_ptr<const detail::TurnAxes> turns;
   };
   ModelLibraryParams params_;
   std::vector<Model> models_;
