@@ -169,16 +169,18 @@ double relative_scene_step(const PointCloud& scene, double step_m) {
   return step_m / std::max(1e-9, double(scene.bounds().sizes().maxCoeff()));
 }
 
-// Symmetry-aware surface distance: model points at the found pose T, expressed in the model
-// frame at the true pose, against the model's own surface points (BOP MSSD at 10% of the diameter).
-bool symmetric_match(const ModelData& m, const Transform& truth, const Transform& T) {
+// Symmetry-aware surface distance (BOP MSSD), as a share of the model's diameter: the largest
+// distance of the model's points at the found pose T, expressed in the model frame at the true
+// pose, from the model's own surface points.
+double symmetric_distance(const ModelData& m, const Transform& truth, const Transform& T) {
   const Transform e = truth.inverse() * T;
-  for (const auto& p : m.points.points) {
-    const Eigen::Vector3f q = (e * p.cast<double>()).cast<float>();
-    if (std::sqrt(m.tree->nearest(q).second) > 0.1 * m.diameter) return false;
-  }
-  return true;
+  double worst = 0;
+  for (const auto& p : m.points.points) worst = std::max(worst, double(std::sqrt(m.tree->nearest((e * p.cast<double>()).cast<float>()).second)));
+  return worst / m.diameter;
 }
+
+// Found by the BOP measure: MSSD within 10% of the diameter.
+bool symmetric_match(const ModelData& m, const Transform& truth, const Transform& T) { return symmetric_distance(m, truth, T) <= 0.1; }
 
 // Scores detections against the instances; returns false positives.
 int score(std::vector<Instance>& instances, const std::vector<Detection>& detections, const std::map<std::string, ModelData*>& models) {
@@ -454,6 +456,13 @@ int main(int argc, char** argv) {
           right += (library.model_points(mt.model_index).points[mt.model_point] - local).norm() < 0.006f;
         }
         std::fprintf(stderr, "  [matches on it: %d of any model, %d of its model, %d right]", basis_on, on_instance, right);
+        if (!best) {
+          // The nearest pose tried or proposed, by the same surface distance.
+          double nearest = 1e9;
+          for (const auto& c : result.candidates)
+            if (library.model_name(c.model_index) == inst.model) nearest = std::min(nearest, symmetric_distance(md, inst.T_sensor_object, c.T_scene_model));
+          std::fprintf(stderr, "  [nearest pose %.0f%% of the diameter]", 100 * nearest);
+        }
         const std::string stage = !best                                                   ? "no-pose"
                                   : best->stage == RecognitionCandidate::Stage::proposed ? "not-refined"
                                   : best->stage == RecognitionCandidate::Stage::coarse   ? "refined-coarse-only"

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <deque>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -266,14 +267,15 @@ class FreeSpace {
   std::vector<Map> maps_;
 };
 
-// A pose hypothesis from a pair of matches, with its cheap score.
+// A pose hypothesis (a group's, a pair of matches', a vote cluster's), with its cheap score.
 struct PoseHypothesis {
   Transform T_scene_model = Transform::Identity();
   size_t first_support = 0;  ///< sampled model points on the scene surface when made
   size_t support = 0;        ///< the same, leaving out the surface accepted instances explain
   bool done = false;         ///< refined and verified (or made redundant): not tried again
-  bool voted = false;        ///< from point-pair voting (else from a pair of spin-image matches)
-  std::optional<IcpResult> coarse;
+  RecognitionCandidate::Source source = RecognitionCandidate::Source::pairs;
+  size_t size = 0;           ///< a group's correspondences; else first_support
+  std::optional<IcpResult> coarse;  ///< once refined by the coarse ICP
 };
 
 // A cheap verification of a model's pose, which ranks hypotheses before any ICP: of a sample of
@@ -403,7 +405,7 @@ std::vector<PoseHypothesis> voting_hypotheses(const detail::PairFeatureModel& ta
   for (const auto& v : voted) {
     PoseHypothesis h;
     h.T_scene_model = v.T_scene_model;
-    h.voted = true;
+    h.source = RecognitionCandidate::Source::voting;
     h.first_support = h.support = surface_support.first(h.T_scene_model, 1.5 * res);
     if (h.support >= min_support) made.push_back(std::move(h));
   }
@@ -719,8 +721,12 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     }
   result.seconds_search = since(t0);
 
-  // Per model: group, estimate, verify by ICP; accept instances one at a time, removing the
-  // scene points each explains.
+  // One interpretation of the scene across all models: every model's next instance is searched
+  // for (starting poses ranked, refined by ICP, verified); of those found, the one that explains
+  // the most scene surface not yet explained is accepted and its surface marked explained; the
+  // searches that acceptance affects are redone; until no model finds one more. A tee's run
+  // "found" on a pipe explains less of it than the pipe does, so the pipe is accepted first, and
+  // the tee's hypotheses there lose their support to it.
   t0 = Clock::now();
   size_t largest_model = 0;
   for (size_t m = 0; m < library.model_count(); ++m) largest_model = std::max(largest_model, library.model_points(m).points.size());
@@ -736,222 +742,273 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   grouping.gamma_m = params.gamma_factor * res;
   grouping.max_groups = params.max_groups;
   grouping.max_candidates = params.max_matches_grouped;
-  std::vector<std::vector<size_t>> support;  // per instance: the scene points it explains
-  for (size_t m = 0; m < library.model_count(); ++m) {
-    const PointCloud& model = library.model_points(m);
-    auto candidates = per_model[m];
-    std::vector<char> explained(scene_points.points.size(), 0);
-    const SurfaceSupport surface_support(model, params.pair_score_points, scene_points, scene_tree);
-    auto made = pair_hypotheses(model, scene_points, surface_support, candidates, res, params);
-    auto voted = voting_hypotheses(library.pair_features(m), scene_points, free_space.background(), surface_support, res, params);
-    made.insert(made.end(), std::make_move_iterator(voted.begin()), std::make_move_iterator(voted.end()));
-    auto pool = best_distinct(std::move(made), model, static_cast<size_t>(std::max(params.pair_pool, 0)));
-    const auto source_of = [](const PoseHypothesis* h) {
-      return !h ? RecognitionCandidate::Source::grouping : h->voted ? RecognitionCandidate::Source::voting : RecognitionCandidate::Source::pairs;
+  std::vector<char> explained(scene_points.points.size(), 0);  // by an accepted instance
+  bool any_explained = false;
+  // The scene points within 2 resolutions of the model at T that no accepted instance explains.
+  const auto newly_explained = [&](const PointCloud& model, const Transform& T_scene_model) {
+    const Eigen::Isometry3f T = T_scene_model.cast<float>();
+    std::vector<size_t> near, out;
+    std::vector<char> counted(scene_points.points.size(), 0);
+    for (const auto& p : model.points) {
+      scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
+      for (const size_t s : near)
+        if (!explained[s] && !counted[s]) counted[s] = 1, out.push_back(s);
+    }
+    return out;
+  };
+  // A pose that lies on an accepted instance (the ICP brought it back there from a start on the
+  // surface around it, or it is another model fitted to part of it): more than
+  // max_shared_support of the scene surface it lies on is explained already.
+  const auto on_accepted = [&](const PointCloud& model, const Transform& T_scene_model) {
+    if (!any_explained) return false;
+    const Eigen::Isometry3f T = T_scene_model.cast<float>();
+    std::vector<size_t> near;
+    std::vector<char> counted(scene_points.points.size(), 0);
+    size_t on = 0, taken = 0;
+    for (const auto& p : model.points) {
+      scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
+      for (const size_t s : near)
+        if (!counted[s]) counted[s] = 1, ++on, taken += explained[s];
+    }
+    return static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on);
+  };
+  // What something hid is not held against the overlap either; but what is seen must be more
+  // than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
+  const auto passes = [&](const IcpResult& icp, const FreeSpace::Check& seen) {
+    return icp.overlap_fraction >= params.min_model_overlap * (1 - seen.occluded) && icp.rmse_m <= params.max_rmse_factor * res &&
+           seen.free_space <= params.max_free_space_fraction && seen.explained >= params.min_visible_explained &&
+           seen.planarity <= params.max_support_planarity && seen.continued <= params.max_continued_fraction;
+  };
+  const auto source_of = [](const PoseHypothesis* h) {
+    return h ? h->source : RecognitionCandidate::Source::grouping;
+  };
+
+  struct Verified {
+    Transform T;
+    IcpResult icp;
+    double score;
+    size_t size;
+    std::optional<FreeSpace::Check> seen;  ///< once refined
+    PoseHypothesis* origin = nullptr;      ///< the hypothesis it came from
+  };
+  // A model's search for its next instance, kept between rounds.
+  struct Search {
+    size_t m = 0;
+    std::vector<detail::Correspondence> candidates;  ///< spin-image matches on surface not yet explained
+    std::deque<PoseHypothesis> groups;               ///< the groups' poses so far (a deque: Verified points into it)
+    std::vector<PoseHypothesis> pool;                ///< pair and voting hypotheses
+    std::unique_ptr<SurfaceSupport> surface_support;
+    int instances = 0;
+    bool stale = true;                ///< to be searched (again)
+    std::vector<Verified> verified;   ///< of the last search, best first
+    std::optional<size_t> winner;     ///< into verified: the instance that search found
+    size_t gain = 0;                  ///< scene points the winner explains that no accepted instance does
+  };
+  // Starting poses: the groups' and the pair and voting hypotheses still open (one that lost half
+  // its support to the surface accepted instances explain was on such an instance), ranked by
+  // their support on the scene surface not yet explained (a cheap verification); the best of
+  // each kind. With `regroup`, the spin-image matches are grouped again first.
+  struct Start {
+    size_t support;
+    PoseHypothesis* origin;
+  };
+  const auto ranked_starts = [&](Search& s, bool regroup) {
+    const PointCloud& model = library.model_points(s.m);
+    if (regroup && params.group_hypotheses && s.candidates.size() >= 3)
+      for (const auto& g : detail::group_correspondences(model, scene_points, s.candidates, grouping).groups) {
+        const auto same = [&](const PoseHypothesis& h) { return h.T_scene_model.matrix() == g.T_target_source.matrix(); };
+        if (std::any_of(s.groups.begin(), s.groups.end(), same)) continue;
+        PoseHypothesis& h = s.groups.emplace_back();
+        h.T_scene_model = g.T_target_source;
+        h.source = RecognitionCandidate::Source::grouping;
+        h.size = g.size;
+        h.first_support = (*s.surface_support)(h.T_scene_model, 2.0 * res, explained);
+      }
+    std::vector<Start> groups, pairs;
+    // Groups are scored with a wider margin: their coarser first pose only the ICP brings onto the surface.
+    for (auto& h : s.groups)
+      if (!h.done && 2 * (h.support = (*s.surface_support)(h.T_scene_model, 2.0 * res, explained)) >= h.first_support) groups.push_back({h.support, &h});
+      else h.done = true;
+    for (auto& h : s.pool)
+      if (!h.done && 2 * (h.support = (*s.surface_support)(h.T_scene_model, 1.5 * res, explained)) >= h.first_support) pairs.push_back({h.support, &h});
+      else h.done = true;
+    // Groups and pair hypotheses are ranked apart: the pairs were chosen for their support and
+    // would crowd out the groups.
+    const auto keep_best = [&](std::vector<Start>& v) {
+      std::stable_sort(v.begin(), v.end(), [](const Start& a, const Start& b) { return a.support > b.support; });
+      v.resize(std::min(v.size(), static_cast<size_t>(std::max(params.coarse_refined, 0))));
     };
-    for (int instance = 0; instance < params.max_instances; ++instance) {
-      struct Verified {
-        Transform T;
-        IcpResult icp;
-        double score;
-        size_t size;
-        std::optional<FreeSpace::Check> seen;  ///< once refined
-        PoseHypothesis* origin = nullptr;      ///< the pair hypothesis it came from
-      };
-      // Starting poses: the groups' and the pair hypotheses still open (a pair hypothesis that
-      // lost half its support to the surface accepted instances explain was on such an
-      // instance). All are ranked by their support on the scene surface not yet explained (a
-      // cheap verification), and only the best are refined by the coarse ICP.
-      struct Start {
-        Transform T;
-        size_t size, support;
-        PoseHypothesis* origin;
-      };
-      std::vector<Start> starts;
-      if (params.group_hypotheses && candidates.size() >= 3) {
-        const auto grouped = detail::group_correspondences(model, scene_points, candidates, grouping);
-        for (const auto& g : grouped.groups)
-          starts.push_back({g.T_target_source, g.size,
-                            surface_support(g.T_target_source, 2.0 * res, explained), nullptr});
+    keep_best(groups);
+    keep_best(pairs);
+    groups.insert(groups.end(), pairs.begin(), pairs.end());
+    return groups;
+  };
+  // The best starting poses are refined by the coarse ICP; in score order, the first that passes
+  // the fine ICP and the visibility tests wins.
+  const auto search = [&](Search& s) {
+    const PointCloud& model = library.model_points(s.m);
+    s.verified.clear();
+    s.winner.reset();
+    for (const auto& st : ranked_starts(s, true)) {
+      PoseHypothesis& h = *st.origin;
+      if (!h.coarse) h.coarse = icp_point_to_plane(model, scene_points, scene_tree, h.T_scene_model, coarse);
+      const IcpResult& r = *h.coarse;
+      s.verified.push_back({r.T_target_source, r, r.overlap_fraction - 0.5 * r.rmse_m / res,
+                            h.source == RecognitionCandidate::Source::grouping ? h.size : h.support, std::nullopt, &h});
+    }
+    std::sort(s.verified.begin(), s.verified.end(), [](const Verified& a, const Verified& b) { return a.score > b.score; });
+    // Poses the coarse ICP brought together (within 2 resolutions and 2 degrees of a better
+    // one) are refined once.
+    {
+      std::vector<Verified> distinct;
+      for (auto& v : s.verified) {
+        bool same = false;
+        for (const auto& d : distinct)
+          if ((d.T.translation() - v.T.translation()).norm() < 2 * res && rotation_angle(d.T.inverse() * v.T) < 2.0 * std::numbers::pi / 180) {
+            same = true;
+            break;
+          }
+        if (same) v.origin->done = true;
+        if (!same) distinct.push_back(std::move(v));
       }
-      for (auto& h : pool) {
-        if (h.done) continue;
-        if (instance > 0) h.support = surface_support(h.T_scene_model, 1.5 * res, explained);
-        if (2 * h.support < h.first_support) h.done = true;
-        else starts.push_back({h.T_scene_model, h.support, h.support, &h});
+      s.verified = std::move(distinct);
+    }
+    const auto taken = [&](const Transform& T) { return on_accepted(model, T); };
+    for (size_t tried = 0; tried < std::min<size_t>(static_cast<size_t>(std::max(params.max_candidates_verified, 0)), s.verified.size()); ++tried) {
+      auto& v = s.verified[tried];
+      v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
+      v.T = v.icp.T_target_source;
+      const auto& seen = v.seen.emplace(free_space.check(model, v.T));
+      v.origin->done = true;
+      if (!passes(v.icp, seen) || taken(v.T)) continue;
+      s.winner = tried;
+      break;
+    }
+    if (!s.winner) return;
+    // A part whose distinguishing piece is small (a valve's stem and hand wheel, a tee's branch)
+    // also fits the scene with its large, nearly symmetric body (the run) turned about its axis
+    // and the piece where nothing contradicts it: the winner's turns compete with it.
+    auto& w = s.verified[*s.winner];
+    if (const auto turn = better_turn(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, scene_points, scene_tree,
+                                      free_space, coarse, fine, params, passes, taken)) {
+      w.icp = turn->icp;
+      w.T = turn->icp.T_target_source;
+      w.seen = turn->seen;
+    }
+    s.gain = newly_explained(model, w.T).size();
+  };
+  // The last search's poses, for diagnosis (`accepted`: its winner was).
+  const auto record = [&](const Search& s, bool accepted) {
+    if (!params.keep_candidates) return;
+    for (size_t k = 0; k < s.verified.size(); ++k) {
+      const auto& v = s.verified[k];
+      RecognitionCandidate c;
+      c.model_index = s.m;
+      c.T_scene_model = v.T;
+      c.overlap_fraction = v.icp.overlap_fraction;
+      c.rmse_m = v.icp.rmse_m;
+      c.correspondences = v.size;
+      if (v.seen) {
+        c.free_space_fraction = v.seen->free_space;
+        c.visible_explained = v.seen->explained;
+        c.occluded_fraction = v.seen->occluded;
+        c.continued_fraction = v.seen->continued;
       }
-      // Groups and pair hypotheses are ranked apart: the pairs were chosen for their support and
-      // would crowd out groups whose coarser first pose only the ICP brings onto the surface.
-      const auto by_support = [](const Start& a, const Start& b) { return a.support > b.support; };
-      const auto first_pair = std::partition(starts.begin(), starts.end(), [](const Start& st) { return st.origin == nullptr; });
-      const auto groups_end = std::min(first_pair, starts.begin() + std::max(params.coarse_refined, 0));
-      std::stable_sort(starts.begin(), first_pair, by_support);
-      std::stable_sort(first_pair, starts.end(), by_support);
-      const auto pairs_end = first_pair + std::min<std::ptrdiff_t>(starts.end() - first_pair, std::max(params.coarse_refined, 0));
-      starts.erase(pairs_end, starts.end());
-      starts.erase(groups_end, first_pair);
-      std::vector<Verified> verified;
-      for (const auto& st : starts) {
-        IcpResult r;
-        if (st.origin) {
-          if (!st.origin->coarse) st.origin->coarse = icp_point_to_plane(model, scene_points, scene_tree, st.T, coarse);
-          r = *st.origin->coarse;
-        } else {
-          r = icp_point_to_plane(model, scene_points, scene_tree, st.T, coarse);
-        }
-        verified.push_back({r.T_target_source, r, r.overlap_fraction - 0.5 * r.rmse_m / res, st.size, std::nullopt, st.origin});
+      c.source = source_of(v.origin);
+      c.stage = accepted && s.winner == k ? RecognitionCandidate::Stage::accepted
+                : v.seen                   ? RecognitionCandidate::Stage::refused
+                                           : RecognitionCandidate::Stage::coarse;
+      result.candidates.push_back(c);
+    }
+  };
+
+  std::vector<Search> searches(library.model_count());
+  for (size_t m = 0; m < searches.size(); ++m) {
+    auto& s = searches[m];
+    s.m = m;
+    s.candidates = per_model[m];
+    const PointCloud& model = library.model_points(m);
+    s.surface_support = std::make_unique<SurfaceSupport>(model, params.pair_score_points, scene_points, scene_tree);
+    auto made = pair_hypotheses(model, scene_points, *s.surface_support, s.candidates, res, params);
+    auto voted = voting_hypotheses(library.pair_features(m), scene_points, free_space.background(), *s.surface_support, res, params);
+    made.insert(made.end(), std::make_move_iterator(voted.begin()), std::make_move_iterator(voted.end()));
+    s.pool = best_distinct(std::move(made), model, static_cast<size_t>(std::max(params.pair_pool, 0)));
+  }
+  while (true) {
+    for (auto& s : searches)
+      if (s.stale && s.instances < params.max_instances) {
+        record(s, false);
+        search(s);
+        s.stale = false;
       }
-      if (verified.empty()) break;
-      std::sort(verified.begin(), verified.end(), [](const Verified& a, const Verified& b) { return a.score > b.score; });
-      // Poses the coarse ICP brought together (within 2 resolutions and 2 degrees of a better
-      // one) are refined once.
-      {
-        std::vector<Verified> distinct;
-        for (auto& v : verified) {
-          bool same = false;
-          for (const auto& d : distinct)
-            if ((d.T.translation() - v.T.translation()).norm() < 2 * res && rotation_angle(d.T.inverse() * v.T) < 2.0 * std::numbers::pi / 180) {
-              same = true;
-              break;
-            }
-          if (same && v.origin) v.origin->done = true;
-          if (!same) distinct.push_back(std::move(v));
-        }
-        verified = std::move(distinct);
-      }
-      // What something hid is not held against the overlap either; but what is seen must be more
-      // than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
-      const auto passes = [&](const IcpResult& icp, const FreeSpace::Check& seen) {
-        return icp.overlap_fraction >= params.min_model_overlap * (1 - seen.occluded) && icp.rmse_m <= params.max_rmse_factor * res &&
-               seen.free_space <= params.max_free_space_fraction && seen.explained >= params.min_visible_explained &&
-               seen.planarity <= params.max_support_planarity && seen.continued <= params.max_continued_fraction;
-      };
-      // A pose the ICP brought back onto an instance already accepted (from a start on the surface
-      // around it) is that instance again: more than max_shared_support of the scene surface it
-      // lies on is explained already.
-      const auto on_accepted = [&](const Transform& T_scene_model) {
-        if (instance == 0) return false;
-        const Eigen::Isometry3f T = T_scene_model.cast<float>();
-        std::vector<size_t> near;
-        std::vector<char> counted(scene_points.points.size(), 0);
-        size_t on = 0, taken = 0;
-        for (const auto& p : model.points) {
-          scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
-          for (const size_t s : near)
-            if (!counted[s]) counted[s] = 1, ++on, taken += explained[s];
-        }
-        return static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on);
-      };
-      // In score order, the first pose that passes the fine ICP and the free-space test wins.
-      Verified* winner = nullptr;
-      for (int tried = 0; tried < std::min<int>(params.max_candidates_verified, static_cast<int>(verified.size())); ++tried) {
-        auto& v = verified[static_cast<size_t>(tried)];
-        v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
-        v.T = v.icp.T_target_source;
-        const auto& seen = v.seen.emplace(free_space.check(model, v.T));
-        if (v.origin) v.origin->done = true;
-        if (!passes(v.icp, seen) || on_accepted(v.T)) continue;
-        winner = &v;
+    Search* next = nullptr;
+    for (auto& s : searches)
+      if (s.winner && s.instances < params.max_instances && (!next || s.gain > next->gain)) next = &s;
+    if (!next) break;
+    // Accept it.
+    const PointCloud& model = library.model_points(next->m);
+    record(*next, true);
+    auto& verified = next->verified;
+    if (*next->winner != 0) std::swap(verified[*next->winner], verified.front());
+    const auto& top = verified.front();
+    RecognizedInstance found;
+    found.model = library.model_name(next->m);
+    found.model_index = next->m;
+    found.T_scene_model = top.T;
+    found.overlap_fraction = top.icp.overlap_fraction;
+    found.rmse_m = top.icp.rmse_m;
+    found.score = top.score;
+    found.correspondences = top.size;
+    found.free_space_fraction = top.seen->free_space;
+    found.visible_explained = top.seen->explained;
+    found.occluded_fraction = top.seen->occluded;
+    found.continued_fraction = top.seen->continued;
+    for (size_t k = 1; k < verified.size(); ++k) {
+      const auto& other = verified[k];
+      if (other.score < top.score - params.ambiguity_margin) break;
+      if (rotation_angle(top.T.inverse() * other.T) > 10.0 * std::numbers::pi / 180 && other.icp.rmse_m <= params.max_rmse_factor * res) {
+        found.ambiguous = true;
+        found.T_scene_model_alternative = other.T;
         break;
       }
-      // A part whose distinguishing piece is small (a valve's stem and hand wheel, a tee's
-      // branch) also fits the scene with its large, nearly symmetric body (the run) turned about
-      // its axis and the piece where nothing contradicts it: the winner's turns compete with it.
-      if (winner)
-        if (const auto turn = better_turn(model, library.turn_axes(m), winner->T, winner->icp.overlap_fraction - winner->seen->free_space, scene_points, scene_tree,
-                                          free_space, coarse, fine, params, passes, on_accepted)) {
-          winner->icp = turn->icp;
-          winner->T = turn->icp.T_target_source;
-          winner->seen = turn->seen;
-        }
-      if (params.keep_candidates)
-        for (size_t k = 0; k < verified.size(); ++k) {
-          const auto& v = verified[k];
-          RecognitionCandidate c;
-          c.model_index = m;
-          c.T_scene_model = v.T;
-          c.overlap_fraction = v.icp.overlap_fraction;
-          c.rmse_m = v.icp.rmse_m;
-          c.correspondences = v.size;
-          if (v.seen) {
-            c.free_space_fraction = v.seen->free_space;
-            c.visible_explained = v.seen->explained;
-            c.occluded_fraction = v.seen->occluded;
-            c.continued_fraction = v.seen->continued;
-          }
-          c.source = source_of(v.origin);
-          c.stage = &v == winner ? RecognitionCandidate::Stage::accepted
-                                 : v.seen ? RecognitionCandidate::Stage::refused : RecognitionCandidate::Stage::coarse;
-          result.candidates.push_back(c);
-        }
-      if (!winner) break;
-      if (winner != &verified.front()) std::swap(*winner, verified.front());
-      auto& top = verified.front();
-      RecognizedInstance found;
-      found.model = library.model_name(m);
-      found.model_index = m;
-      found.T_scene_model = top.T;
-      found.overlap_fraction = top.icp.overlap_fraction;
-      found.rmse_m = top.icp.rmse_m;
-      found.score = top.score;
-      found.correspondences = top.size;
-      found.free_space_fraction = top.seen->free_space;
-      found.visible_explained = top.seen->explained;
-      found.occluded_fraction = top.seen->occluded;
-      found.continued_fraction = top.seen->continued;
-      for (size_t k = 1; k < verified.size(); ++k) {
-        const auto& other = verified[k];
-        if (other.score < top.score - params.ambiguity_margin) break;
-        const Transform d = top.T.inverse() * other.T;
-        if (rotation_angle(d) > 10.0 * std::numbers::pi / 180 && other.icp.rmse_m <= params.max_rmse_factor * res) {
-          found.ambiguous = true;
-          found.T_scene_model_alternative = other.T;
-          break;
-        }
-      }
-      result.instances.push_back(found);
-      // The scene points this instance explains no longer support other instances of the model.
-      const Eigen::Isometry3f T = top.T.cast<float>();
-      std::vector<size_t> near;
-      auto& mine = support.emplace_back();
-      for (const auto& p : model.points) {
-        scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
-        for (size_t s : near)
-          if (!explained[s]) explained[s] = 1, mine.push_back(s);
-      }
-      std::erase_if(candidates, [&](const detail::Correspondence& c) { return explained[c.target]; });
     }
+    result.instances.push_back(found);
+    for (const size_t s : newly_explained(model, top.T)) explained[s] = 1;
+    any_explained = true;
+    ++next->instances;
+    next->verified.clear();
+    next->winner.reset();
+    next->stale = true;
+    // The scene points it explains no longer support other instances. Another model's instance
+    // found on it is refused; one that lost scene surface to it explains less; a search whose
+    // starting poses lost support to it would now rank others among its best.
+    for (auto& s : searches) {
+      std::erase_if(s.candidates, [&](const detail::Correspondence& c) { return explained[c.target]; });
+      if (s.stale) continue;
+      const PointCloud& other = library.model_points(s.m);
+      if (s.winner) {
+        if (on_accepted(other, s.verified[*s.winner].T)) s.stale = true;
+        else s.gain = newly_explained(other, s.verified[*s.winner].T).size();
+      } else {
+        // Searched again only when a starting pose not refined yet is now among the best.
+        const auto starts = ranked_starts(s, false);
+        s.stale = std::any_of(starts.begin(), starts.end(), [](const Start& st) { return !st.origin->coarse; });
+      }
+    }
+  }
+  for (const auto& s : searches) {
+    record(s, false);
     if (params.keep_candidates)
-      for (const auto& h : pool)
+      for (const auto& h : s.pool)
         if (!h.coarse) {
           RecognitionCandidate c;
-          c.model_index = m;
+          c.model_index = s.m;
           c.T_scene_model = h.T_scene_model;
           c.correspondences = h.first_support;
           c.source = source_of(&h);
           c.stage = RecognitionCandidate::Stage::proposed;
           result.candidates.push_back(c);
         }
-  }
-  // Instances of different models that explain the same surface compete: the one explaining
-  // more of the scene wins, and an instance whose surface is mostly another's already is
-  // dropped (a flange's face "found" on a tee's end, a part at a slightly different scale).
-  {
-    std::vector<size_t> order(result.instances.size());
-    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return support[a].size() > support[b].size(); });
-    std::vector<char> claimed(scene_points.points.size(), 0), keep(order.size(), 0);
-    for (const size_t i : order) {
-      size_t shared = 0;
-      for (const size_t s : support[i]) shared += claimed[s];
-      if (static_cast<double>(shared) > params.max_shared_support * static_cast<double>(support[i].size())) continue;
-      keep[i] = 1;
-      for (const size_t s : support[i]) claimed[s] = 1;
-    }
-    std::vector<RecognizedInstance> kept;
-    for (size_t i = 0; i < keep.size(); ++i)
-      if (keep[i]) kept.push_back(std::move(result.instances[i]));
-    result.instances = std::move(kept);
   }
   result.seconds_verify = since(t0);
   return result;

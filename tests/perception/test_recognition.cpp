@@ -298,25 +298,65 @@ TEST(Recognition, BadInputThrows) {
 // is "found" turned 127.5 degrees about its run, the wheel where nothing contradicts it - which
 // this test expects, so that the scene keeps testing the search; with it, the valve must be found
 // at its pose (MSSD within 10% of its diameter; its half turn about the stem is a symmetry).
-TEST(Recognition, AValveFoundTurnedAboutItsRunIsTurnedBack) {
-  const auto dir = test::data_dir() / "recognition" / "clutter-scene9";
-  const TriangleMesh scene = mesh_range_image(io::read_range_image(dir / "range.ari")).mesh;
+// A scene bench_recognition kept (data/recognition/clutter-sceneN: the range image and the
+// simulator's truth): its mesh and the library objects in it, with their poses in the sensor frame.
+struct KeptScene {
+  TriangleMesh mesh;
+  struct Object {
+    std::string name, model;
+    Transform T_sensor_object;
+    double visible_fraction;
+  };
+  std::vector<Object> objects;
+};
+KeptScene kept_scene(const std::string& name) {
+  const auto dir = test::data_dir() / "recognition" / name;
+  KeptScene scene;
+  scene.mesh = mesh_range_image(io::read_range_image(dir / "range.ari")).mesh;
   const auto truth = nlohmann::json::parse(std::ifstream(dir / "truth.json"));
   const auto matrix = [](const nlohmann::json& v) {
     Transform T = Transform::Identity();
     for (int k = 0; k < 16; ++k) T.matrix()(k / 4, k % 4) = v.at(static_cast<size_t>(k)).get<double>();
     return T;
   };
+  const Transform T_sensor_world = matrix(truth.at("T_world_sensor")).inverse();
+  for (const auto& o : truth.at("objects")) {
+    const auto object = o.at("name").get<std::string>();
+    if (object.find('#') == std::string::npos || object.starts_with("distractor")) continue;
+    scene.objects.push_back({object, object.substr(0, object.find('#')), T_sensor_world * matrix(o.at("T_world_object")), o.at("visible_fraction").get<double>()});
+  }
+  return scene;
+}
+
+// A library model: its mesh, and its surface every 2 mm for the surface distance.
+struct LibraryModel {
+  TriangleMesh mesh;
+  PointCloud surface;
+  std::unique_ptr<KdTree3> tree;
+  float diameter;
+};
+LibraryModel library_model(const std::string& name) {
+  const auto path = test::data_dir() / "workcells" / "models" / (name + ".ply");
+  LibraryModel m;
+  m.mesh = io::ply_to_mesh(io::read_ply(path), path);
+  m.surface = sample_surface(m.mesh, 0.002);
+  m.tree = std::make_unique<KdTree3>(m.surface.points);
+  m.diameter = m.surface.bounds().diagonal().norm();
+  return m;
+}
+
+TEST(Recognition, AValveFoundTurnedAboutItsRunIsTurnedBack) {
+  const auto kept = kept_scene("clutter-scene9");
+  const TriangleMesh& scene = kept.mesh;
   Transform T_sensor_valve = Transform::Identity();
-  for (const auto& o : truth.at("objects"))
-    if (o.at("name") == "valve#1") T_sensor_valve = matrix(truth.at("T_world_sensor")).inverse() * matrix(o.at("T_world_object"));
-  const auto path = test::data_dir() / "workcells" / "models" / "valve.ply";
-  const auto mesh = io::ply_to_mesh(io::read_ply(path), path);
+  for (const auto& o : kept.objects)
+    if (o.name == "valve#1") T_sensor_valve = o.T_sensor_object;
+  const auto valve = library_model("valve");
   SpinImageLibrary library;
-  library.add_model("valve", mesh);
-  const PointCloud surface = sample_surface(mesh, 0.002);
-  const KdTree3 tree(surface.points);
-  const float diameter = surface.bounds().diagonal().norm();
+  library.add_model("valve", valve.mesh);
+  const PointCloud& surface = valve.surface;
+  const KdTree3& tree = *valve.tree;
+  const float diameter = valve.diameter;
 
   RecognitionParams params;
   params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
@@ -333,6 +373,44 @@ TEST(Recognition, AValveFoundTurnedAboutItsRunIsTurnedBack) {
       EXPECT_EQ(result.instances.size(), 1u);
     }
   }
+}
+
+// One interpretation of the scene across models: a tee's run fits any pipe of its bore, and in a
+// pile of pipes and tees the tee's best-supported poses lie on the pipes; once the pipes are
+// accepted (they explain more of the scene than a tee's run on them), those poses lose their
+// support and the true tees rank first. Method: bench_recognition's scene 2
+// (data/recognition/clutter-scene2: four tees and three pipes piled on a table with distractors,
+// one simulated Vivid view), recognized with a library of the tee and the pipe. Before the
+// interpretation was joint (each model searched alone, in library order) the two tees 1% and 36%
+// occluded were not found: their true poses ranked 123rd and 126th. Every tee and pipe less than
+// 70% occluded must be found at its pose (MSSD within 10% of its diameter), and nothing else.
+TEST(Recognition, PartsHiddenByFitsOnOtherPartsAreFoundOnceThoseAreExplained) {
+  const auto kept = kept_scene("clutter-scene2");
+  std::map<std::string, LibraryModel> models;
+  SpinImageLibrary library;
+  for (const std::string name : {"tee", "pipe_350"}) {
+    models[name] = library_model(name);
+    library.add_model(name, models[name].mesh);
+  }
+  RecognitionParams params;
+  params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
+  const auto result = recognize(kept.mesh, library, params);
+  std::vector<char> true_instance(result.instances.size(), 0);
+  int expected = 0;
+  for (const auto& o : kept.objects) {
+    const auto& m = models.at(o.model);
+    bool found = false;
+    for (size_t i = 0; i < result.instances.size(); ++i)
+      if (result.instances[i].model == o.model && surface_distance(m.surface, *m.tree, o.T_sensor_object, result.instances[i].T_scene_model) < 0.1f * m.diameter)
+        found = true, true_instance[i] = 1;
+    std::printf("%s (%.0f%% occluded): %s\n", o.name.c_str(), 100 * (1 - o.visible_fraction), found ? "found" : "missed");
+    if (o.visible_fraction > 0.3) {
+      ++expected;
+      EXPECT_TRUE(found) << o.name << " (" << 100 * (1 - o.visible_fraction) << "% occluded) was not found at its pose";
+    }
+  }
+  EXPECT_EQ(expected, 6);  // the scene's four tees, one of them 73% occluded, and three pipes
+  for (size_t i = 0; i < result.instances.size(); ++i) EXPECT_TRUE(true_instance[i]) << "false " << result.instances[i].model;
 }
 
 }  // namespace

@@ -139,10 +139,9 @@ struct RecognitionParams {
   /// cylinder of a slightly different radius leaves 1.0-1.3 mm.
   double max_rmse_factor = 0.3;
   int max_instances = 5;               ///< [1] per model
-  /// [1] an instance sharing more than this share of the scene surface it explains with an
-  /// instance (of another model) that explains more is dropped; a pose of a model on surface an
-  /// accepted instance of the same model explains more than this share of is refused (the same
-  /// instance again)
+  /// [1] a pose on scene surface more than this share of which an accepted instance explains is
+  /// refused: the same instance again, or another model fitted to part of it (instances are
+  /// accepted in the order of how much scene surface they explain, across models)
   double max_shared_support = 0.3;
   double ambiguity_margin = 0.05;      ///< [1] a different pose within this overlap of the best is an ambiguity
   /// Where the sensors that saw the scene were, in the scene frame (one view for a single scan,
