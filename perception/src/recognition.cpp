@@ -274,7 +274,7 @@ struct PoseHypothesis {
   size_t support = 0;        ///< the same, leaving out the surface accepted instances explain
   bool done = false;         ///< refined and verified (or made redundant): not tried again
   RecognitionCandidate::Source source = RecognitionCandidate::Source::pairs;
-  size_t size = 0;           ///< a group's correspondences; else first_support
+  size_t size = 0;           ///< a group's correspondences
   std::optional<IcpResult> coarse;  ///< once refined by the coarse ICP
 };
 
@@ -744,33 +744,31 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   grouping.max_candidates = params.max_matches_grouped;
   std::vector<char> explained(scene_points.points.size(), 0);  // by an accepted instance
   bool any_explained = false;
-  // The scene points within 2 resolutions of the model at T that no accepted instance explains.
-  const auto newly_explained = [&](const PointCloud& model, const Transform& T_scene_model) {
+  // The scene surface the model at T lies on: the scene points within 2 resolutions of it.
+  const auto lies_on = [&](const PointCloud& model, const Transform& T_scene_model) {
     const Eigen::Isometry3f T = T_scene_model.cast<float>();
     std::vector<size_t> near, out;
     std::vector<char> counted(scene_points.points.size(), 0);
     for (const auto& p : model.points) {
       scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
       for (const size_t s : near)
-        if (!explained[s] && !counted[s]) counted[s] = 1, out.push_back(s);
+        if (!counted[s]) counted[s] = 1, out.push_back(s);
     }
     return out;
+  };
+  const auto newly_explained = [&](const PointCloud& model, const Transform& T_scene_model) {
+    auto on = lies_on(model, T_scene_model);
+    std::erase_if(on, [&](size_t s) { return explained[s]; });
+    return on;
   };
   // A pose that lies on an accepted instance (the ICP brought it back there from a start on the
   // surface around it, or it is another model fitted to part of it): more than
   // max_shared_support of the scene surface it lies on is explained already.
   const auto on_accepted = [&](const PointCloud& model, const Transform& T_scene_model) {
     if (!any_explained) return false;
-    const Eigen::Isometry3f T = T_scene_model.cast<float>();
-    std::vector<size_t> near;
-    std::vector<char> counted(scene_points.points.size(), 0);
-    size_t on = 0, taken = 0;
-    for (const auto& p : model.points) {
-      scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
-      for (const size_t s : near)
-        if (!counted[s]) counted[s] = 1, ++on, taken += explained[s];
-    }
-    return static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on);
+    const auto on = lies_on(model, T_scene_model);
+    const auto taken = std::count_if(on.begin(), on.end(), [&](size_t s) { return explained[s]; });
+    return static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on.size());
   };
   // What something hid is not held against the overlap either; but what is seen must be more
   // than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
