@@ -743,7 +743,6 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   grouping.max_groups = params.max_groups;
   grouping.max_candidates = params.max_matches_grouped;
   std::vector<char> explained(scene_points.points.size(), 0);  // by an accepted instance
-  bool any_explained = false;
   // The scene surface the model at T lies on: the scene points within 2 resolutions of it.
   const auto lies_on = [&](const PointCloud& model, const Transform& T_scene_model) {
     const Eigen::Isometry3f T = T_scene_model.cast<float>();
@@ -765,7 +764,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // surface around it, or it is another model fitted to part of it): more than
   // max_shared_support of the scene surface it lies on is explained already.
   const auto on_accepted = [&](const PointCloud& model, const Transform& T_scene_model) {
-    if (!any_explained) return false;
+    if (result.instances.empty()) return false;
     const auto on = lies_on(model, T_scene_model);
     const auto taken = std::count_if(on.begin(), on.end(), [&](size_t s) { return explained[s]; });
     return static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on.size());
@@ -777,30 +776,26 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
            seen.free_space <= params.max_free_space_fraction && seen.explained >= params.min_visible_explained &&
            seen.planarity <= params.max_support_planarity && seen.continued <= params.max_continued_fraction;
   };
-  const auto source_of = [](const PoseHypothesis* h) {
-    return h ? h->source : RecognitionCandidate::Source::grouping;
-  };
-
   struct Verified {
     Transform T;
     IcpResult icp;
     double score;
     size_t size;
     std::optional<FreeSpace::Check> seen;  ///< once refined
-    PoseHypothesis* origin = nullptr;      ///< the hypothesis it came from
+    PoseHypothesis* origin;                ///< the hypothesis it came from
   };
   // A model's search for its next instance, kept between rounds.
   struct Search {
     size_t m = 0;
     std::vector<detail::Correspondence> candidates;  ///< spin-image matches on surface not yet explained
-    std::deque<PoseHypothesis> groups;               ///< the groups' poses so far (a deque: Verified points into it)
-    std::vector<PoseHypothesis> pool;                ///< pair and voting hypotheses
+    /// pair and voting hypotheses, then the groups' poses as they come (a deque: Verified points into it)
+    std::deque<PoseHypothesis> hypotheses;
     std::unique_ptr<SurfaceSupport> surface_support;
     int instances = 0;
     bool stale = true;                ///< to be searched (again)
     std::vector<Verified> verified;   ///< of the last search, best first
     std::optional<size_t> winner;     ///< into verified: the instance that search found
-    size_t gain = 0;                  ///< scene points the winner explains that no accepted instance does
+    std::vector<size_t> gain;         ///< the scene points the winner explains that no accepted instance does
   };
   // Starting poses: the groups' and the pair and voting hypotheses still open (one that lost half
   // its support to the surface accepted instances explain was on such an instance), ranked by
@@ -815,21 +810,22 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     if (regroup && params.group_hypotheses && s.candidates.size() >= 3)
       for (const auto& g : detail::group_correspondences(model, scene_points, s.candidates, grouping).groups) {
         const auto same = [&](const PoseHypothesis& h) { return h.T_scene_model.matrix() == g.T_target_source.matrix(); };
-        if (std::any_of(s.groups.begin(), s.groups.end(), same)) continue;
-        PoseHypothesis& h = s.groups.emplace_back();
+        if (std::any_of(s.hypotheses.begin(), s.hypotheses.end(), same)) continue;
+        PoseHypothesis& h = s.hypotheses.emplace_back();
         h.T_scene_model = g.T_target_source;
         h.source = RecognitionCandidate::Source::grouping;
         h.size = g.size;
         h.first_support = (*s.surface_support)(h.T_scene_model, 2.0 * res, explained);
       }
     std::vector<Start> groups, pairs;
-    // Groups are scored with a wider margin: their coarser first pose only the ICP brings onto the surface.
-    for (auto& h : s.groups)
-      if (!h.done && 2 * (h.support = (*s.surface_support)(h.T_scene_model, 2.0 * res, explained)) >= h.first_support) groups.push_back({h.support, &h});
-      else h.done = true;
-    for (auto& h : s.pool)
-      if (!h.done && 2 * (h.support = (*s.surface_support)(h.T_scene_model, 1.5 * res, explained)) >= h.first_support) pairs.push_back({h.support, &h});
-      else h.done = true;
+    for (auto& h : s.hypotheses) {
+      if (h.done) continue;
+      // Groups are scored with a wider margin: their coarser first pose only the ICP brings onto the surface.
+      const bool group = h.source == RecognitionCandidate::Source::grouping;
+      h.support = (*s.surface_support)(h.T_scene_model, (group ? 2.0 : 1.5) * res, explained);
+      if (2 * h.support < h.first_support) h.done = true;
+      else (group ? groups : pairs).push_back({h.support, &h});
+    }
     // Groups and pair hypotheses are ranked apart: the pairs were chosen for their support and
     // would crowd out the groups.
     const auto keep_best = [&](std::vector<Start>& v) {
@@ -893,7 +889,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       w.T = turn->icp.T_target_source;
       w.seen = turn->seen;
     }
-    s.gain = newly_explained(model, w.T).size();
+    s.gain = newly_explained(model, w.T);
   };
   // The last search's poses, for diagnosis (`accepted`: its winner was).
   const auto record = [&](const Search& s, bool accepted) {
@@ -912,7 +908,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         c.occluded_fraction = v.seen->occluded;
         c.continued_fraction = v.seen->continued;
       }
-      c.source = source_of(v.origin);
+      c.source = v.origin->source;
       c.stage = accepted && s.winner == k ? RecognitionCandidate::Stage::accepted
                 : v.seen                   ? RecognitionCandidate::Stage::refused
                                            : RecognitionCandidate::Stage::coarse;
@@ -930,7 +926,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     auto made = pair_hypotheses(model, scene_points, *s.surface_support, s.candidates, res, params);
     auto voted = voting_hypotheses(library.pair_features(m), scene_points, free_space.background(), *s.surface_support, res, params);
     made.insert(made.end(), std::make_move_iterator(voted.begin()), std::make_move_iterator(voted.end()));
-    s.pool = best_distinct(std::move(made), model, static_cast<size_t>(std::max(params.pair_pool, 0)));
+    for (auto& h : best_distinct(std::move(made), model, static_cast<size_t>(std::max(params.pair_pool, 0)))) s.hypotheses.push_back(std::move(h));
   }
   while (true) {
     for (auto& s : searches)
@@ -941,10 +937,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       }
     Search* next = nullptr;
     for (auto& s : searches)
-      if (s.winner && s.instances < params.max_instances && (!next || s.gain > next->gain)) next = &s;
+      if (s.winner && s.instances < params.max_instances && (!next || s.gain.size() > next->gain.size())) next = &s;
     if (!next) break;
     // Accept it.
-    const PointCloud& model = library.model_points(next->m);
     record(*next, true);
     auto& verified = next->verified;
     if (*next->winner != 0) std::swap(verified[*next->winner], verified.front());
@@ -971,8 +966,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       }
     }
     result.instances.push_back(found);
-    for (const size_t s : newly_explained(model, top.T)) explained[s] = 1;
-    any_explained = true;
+    for (const size_t s : next->gain) explained[s] = 1;
     ++next->instances;
     next->verified.clear();
     next->winner.reset();
@@ -986,7 +980,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       const PointCloud& other = library.model_points(s.m);
       if (s.winner) {
         if (on_accepted(other, s.verified[*s.winner].T)) s.stale = true;
-        else s.gain = newly_explained(other, s.verified[*s.winner].T).size();
+        else s.gain = newly_explained(other, s.verified[*s.winner].T);
       } else {
         // Searched again only when a starting pose not refined yet is now among the best.
         const auto starts = ranked_starts(s, false);
@@ -997,13 +991,13 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   for (const auto& s : searches) {
     record(s, false);
     if (params.keep_candidates)
-      for (const auto& h : s.pool)
-        if (!h.coarse) {
+      for (const auto& h : s.hypotheses)
+        if (!h.coarse && h.source != RecognitionCandidate::Source::grouping) {
           RecognitionCandidate c;
           c.model_index = s.m;
           c.T_scene_model = h.T_scene_model;
           c.correspondences = h.first_support;
-          c.source = source_of(&h);
+          c.source = h.source;
           c.stage = RecognitionCandidate::Stage::proposed;
           result.candidates.push_back(c);
         }
