@@ -24,7 +24,7 @@
 // Then a 30-model library (the five parts at six scales, 0.8 to 1.3) on the first 5 scenes,
 // with the compressed (PCA) and the uncompressed spin-image search: rate and search time.
 //
-//   bench_recognition [--scenes N] [--no-ppf] [--ppf-sampling F] [--ppf-residual-mm R] [--ppf-icp-levels L] [--ppf-self-check] [--no-library30] [--diagnose] [--set PARAM=VALUE ...] [--keep DIR]
+//   bench_recognition [--scenes N] [--no-ppf] [--ppf-sampling F] [--ppf-residual-mm R] [--ppf-icp-levels L] [--ppf-self-check] [--no-library30] [--diagnose [--dump-candidates MODEL]] [--only N,M,...] [--set PARAM=VALUE ...] [--keep DIR]
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -33,6 +33,8 @@
 #include <map>
 #include <numbers>
 #include <random>
+#include <set>
+#include <sstream>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -230,6 +232,8 @@ json band_report(const std::vector<Instance>& all) {
 int main(int argc, char** argv) {
   int n_scenes = 50;
   bool with_ppf = true, with_library30 = true, diagnose = false;
+  std::set<int> only;
+  std::string dump;
   RecognitionParams tuned;
   std::string keep;  // a folder that keeps the scenes (workcell files and scans)
   // The point-pair detector's relative sampling step. Its authors use 0.025, but on these parts
@@ -246,6 +250,11 @@ int main(int argc, char** argv) {
     else if (a == "--no-ppf") with_ppf = false;
     else if (a == "--no-library30") with_library30 = false;
     else if (a == "--diagnose") diagnose = true;
+    else if (a == "--dump-candidates" && i + 1 < argc) dump = argv[++i];  // with --diagnose: a model's poses
+    else if (a == "--only" && i + 1 < argc) {  // comma-separated scene numbers: the others are simulated but not recognised
+      std::stringstream list(argv[++i]);
+      for (std::string n; std::getline(list, n, ',');) only.insert(std::atoi(n.c_str()));
+    }
     else if (a == "--keep" && i + 1 < argc) keep = argv[++i];
     else if (a == "--ppf-sampling" && i + 1 < argc) ppf_sampling = std::atof(argv[++i]);
     else if (a == "--ppf-residual-mm" && i + 1 < argc) ppf_residual = 1e-3 * std::atof(argv[++i]);
@@ -293,7 +302,7 @@ int main(int argc, char** argv) {
       }
     }
     else {
-      std::cerr << "usage: bench_recognition [--scenes N] [--no-ppf] [--ppf-sampling F] [--ppf-residual-mm R] [--ppf-icp-levels L] [--ppf-self-check] [--no-library30] [--diagnose] [--set PARAM=VALUE ...] [--keep DIR]\n";
+      std::cerr << "usage: bench_recognition [--scenes N] [--no-ppf] [--ppf-sampling F] [--ppf-residual-mm R] [--ppf-icp-levels L] [--ppf-self-check] [--no-library30] [--diagnose [--dump-candidates MODEL]] [--only N,M,...] [--set PARAM=VALUE ...] [--keep DIR]\n";
       return 2;
     }
   }
@@ -389,7 +398,7 @@ int main(int argc, char** argv) {
         if (1.0 - i.visible < kBands.back()) out.push_back(i);
       return out;
     };
-    if (scene.faces.empty()) continue;
+    if (scene.faces.empty() || (!only.empty() && !only.count(s))) continue;
     ++scored_scenes;
 
     RecognitionParams params = tuned;
@@ -431,6 +440,16 @@ int main(int argc, char** argv) {
                        i.T_scene_model.translation().x(), i.T_scene_model.translation().y(), i.T_scene_model.translation().z());
         }
       }
+      if (!dump.empty())  // every pose of that model tried or proposed, and how far from the nearest true instance
+        for (const auto& c : result.candidates) {
+          if (library.model_name(c.model_index) != dump) continue;
+          double nearest = 1e9;
+          for (const auto& inst : truth)
+            if (inst.model == dump) nearest = std::min(nearest, symmetric_distance(*by_name.at(inst.model), inst.T_sensor_object, c.T_scene_model));
+          std::fprintf(stderr, "    cand stage %d source %d support %zu overlap %.3f rmse %.2f nearest %.0f%% at %.3f %.3f %.3f\n", int(c.stage), int(c.source),
+                       c.correspondences, c.overlap_fraction, c.rmse_m * 1e3, 100 * nearest, c.T_scene_model.translation().x(),
+                       c.T_scene_model.translation().y(), c.T_scene_model.translation().z());
+        }
       // Each missed instance: the furthest stage a pose near it reached, and its figures.
       for (const auto& inst : scored(ours_truth)) {
         if (inst.symmetric) continue;

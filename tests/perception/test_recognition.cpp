@@ -410,7 +410,50 @@ TEST(Recognition, PartsHiddenByFitsOnOtherPartsAreFoundOnceThoseAreExplained) {
     }
   }
   EXPECT_EQ(expected, 6);  // the scene's four tees, one of them 73% occluded, and three pipes
-  for (size_t i = 0; i < result.instances.size(); ++i) EXPECT_TRUE(true_instance[i]) << "false " << result.instances[i].model;
+  for (size_t i = 0; i < result.instances.size(); ++i) {
+    const auto& inst = result.instances[i];
+    float nearest = std::numeric_limits<float>::infinity();
+    for (const auto& o : kept.objects)
+      if (o.model == inst.model) nearest = std::min(nearest, surface_distance(models.at(o.model).surface, *models.at(o.model).tree, o.T_sensor_object, inst.T_scene_model));
+    EXPECT_TRUE(true_instance[i]) << "false " << inst.model << " (overlap " << inst.overlap_fraction << ", the nearest true one " << 1e3 * nearest << " mm away by MSSD)";
+  }
+}
+
+// A search verifies at most five poses with the fine ICP and the visibility tests; in a crowded
+// scene the five best coarse poses of a part were often fits far from passing (a flange's face
+// on a valve's end flange, an elbow's bend on a pipe), and the true pose, sixth or later, was
+// never tried. A coarse pose far from passing is now refused before the fine ICP and does not
+// count, and poses that put the model's surface in the same place (a flange's turns about its
+// axis) are verified once. Method: bench_recognition's scene 21 (data/recognition/
+// clutter-scene21: three flanges, two valves, an elbow and a pipe with distractors, one
+// simulated Vivid view), recognized with the five-part library as the bench does. Before the
+// change the elbow, 60% occluded, was not found. It and the flange 27% occluded must be found at
+// their poses (MSSD within 10% of the diameter), with at most one false instance (the bench's
+// figure for this scene).
+TEST(Recognition, CoarsePosesFarFromPassingDoNotUseUpTheVerifications) {
+  const auto kept = kept_scene("clutter-scene21");
+  std::map<std::string, LibraryModel> models;
+  SpinImageLibrary library;
+  for (const std::string name : {"tee", "elbow_90", "flange", "valve", "pipe_350"}) {
+    models[name] = library_model(name);
+    library.add_model(name, models[name].mesh);
+  }
+  RecognitionParams params;
+  params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
+  const auto result = recognize(kept.mesh, library, params);
+  size_t true_instances = 0;
+  for (const auto& o : kept.objects) {
+    const auto& m = models.at(o.model);
+    bool found = false;
+    for (const auto& inst : result.instances)
+      found |= inst.model == o.model && surface_distance(m.surface, *m.tree, o.T_sensor_object, inst.T_scene_model) < 0.1f * m.diameter;
+    true_instances += found;
+    std::printf("%s (%.0f%% occluded): %s\n", o.name.c_str(), 100 * (1 - o.visible_fraction), found ? "found" : "missed");
+    if (o.name == "flange#1" || o.name == "elbow_90#1") {
+      EXPECT_TRUE(found) << o.name << " was not found at its pose";
+    }
+  }
+  EXPECT_LE(result.instances.size(), true_instances + 1) << "more than one false instance";
 }
 
 }  // namespace

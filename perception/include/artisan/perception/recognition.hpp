@@ -169,7 +169,10 @@ struct RecognitionParams {
   /// where nothing contradicts it.
   int turn_steps = 12;
   double turn_margin = 0.01;           ///< [1] by how much more (overlap, less free-space share)
-  int max_candidates_verified = 5;     ///< [1] poses tried in score order per instance before giving up
+  /// [1] poses refined by the fine ICP and verified, in score order, per instance search before
+  /// giving up (a coarse pose far from passing the visibility tests is refused without it, and
+  /// does not count)
+  int max_candidates_verified = 5;
   bool keep_candidates = false;        ///< fill RecognitionResult::candidates (diagnosis)
 };
 
