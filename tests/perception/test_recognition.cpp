@@ -345,6 +345,40 @@ LibraryModel library_model(const std::string& name) {
   return m;
 }
 
+// A kept scene recognized with a library of the named models, as the bench does (one
+// perspective view at the sensor).
+struct KeptRecognition {
+  std::map<std::string, LibraryModel> models;
+  RecognitionResult result;
+  /// How far (MSSD) an instance lies from the nearest true object of its model in `kept`.
+  float nearest_true(const KeptScene& kept, const RecognizedInstance& inst) const {
+    const auto& m = models.at(inst.model);
+    float nearest = std::numeric_limits<float>::infinity();
+    for (const auto& o : kept.objects)
+      if (o.model == inst.model) nearest = std::min(nearest, surface_distance(m.surface, *m.tree, o.T_sensor_object, inst.T_scene_model));
+    return nearest;
+  }
+  /// Whether an instance of the object's model lies at its pose (MSSD within 10% of the diameter).
+  bool found(const KeptScene::Object& o) const {
+    const auto& m = models.at(o.model);
+    return std::any_of(result.instances.begin(), result.instances.end(), [&](const RecognizedInstance& inst) {
+      return inst.model == o.model && surface_distance(m.surface, *m.tree, o.T_sensor_object, inst.T_scene_model) < 0.1f * m.diameter;
+    });
+  }
+};
+KeptRecognition recognize_kept(const KeptScene& kept, const std::vector<std::string>& names) {
+  KeptRecognition run;
+  SpinImageLibrary library;
+  for (const auto& name : names) {
+    run.models[name] = library_model(name);
+    library.add_model(name, run.models[name].mesh);
+  }
+  RecognitionParams params;
+  params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
+  run.result = recognize(kept.mesh, library, params);
+  return run;
+}
+
 TEST(Recognition, AValveFoundTurnedAboutItsRunIsTurnedBack) {
   const auto kept = kept_scene("clutter-scene9");
   const TriangleMesh& scene = kept.mesh;
@@ -386,23 +420,10 @@ TEST(Recognition, AValveFoundTurnedAboutItsRunIsTurnedBack) {
 // 70% occluded must be found at its pose (MSSD within 10% of its diameter), and nothing else.
 TEST(Recognition, PartsHiddenByFitsOnOtherPartsAreFoundOnceThoseAreExplained) {
   const auto kept = kept_scene("clutter-scene2");
-  std::map<std::string, LibraryModel> models;
-  SpinImageLibrary library;
-  for (const std::string name : {"tee", "pipe_350"}) {
-    models[name] = library_model(name);
-    library.add_model(name, models[name].mesh);
-  }
-  RecognitionParams params;
-  params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
-  const auto result = recognize(kept.mesh, library, params);
-  std::vector<char> true_instance(result.instances.size(), 0);
+  const auto run = recognize_kept(kept, {"tee", "pipe_350"});
   int expected = 0;
   for (const auto& o : kept.objects) {
-    const auto& m = models.at(o.model);
-    bool found = false;
-    for (size_t i = 0; i < result.instances.size(); ++i)
-      if (result.instances[i].model == o.model && surface_distance(m.surface, *m.tree, o.T_sensor_object, result.instances[i].T_scene_model) < 0.1f * m.diameter)
-        found = true, true_instance[i] = 1;
+    const bool found = run.found(o);
     std::printf("%s (%.0f%% occluded): %s\n", o.name.c_str(), 100 * (1 - o.visible_fraction), found ? "found" : "missed");
     if (o.visible_fraction > 0.3) {
       ++expected;
@@ -410,12 +431,10 @@ TEST(Recognition, PartsHiddenByFitsOnOtherPartsAreFoundOnceThoseAreExplained) {
     }
   }
   EXPECT_EQ(expected, 6);  // the scene's four tees, one of them 73% occluded, and three pipes
-  for (size_t i = 0; i < result.instances.size(); ++i) {
-    const auto& inst = result.instances[i];
-    float nearest = std::numeric_limits<float>::infinity();
-    for (const auto& o : kept.objects)
-      if (o.model == inst.model) nearest = std::min(nearest, surface_distance(models.at(o.model).surface, *models.at(o.model).tree, o.T_sensor_object, inst.T_scene_model));
-    EXPECT_TRUE(true_instance[i]) << "false " << inst.model << " (overlap " << inst.overlap_fraction << ", the nearest true one " << 1e3 * nearest << " mm away by MSSD)";
+  for (const auto& inst : run.result.instances) {
+    const float nearest = run.nearest_true(kept, inst);
+    EXPECT_LT(nearest, 0.1f * run.models.at(inst.model).diameter)
+        << "false " << inst.model << " (overlap " << inst.overlap_fraction << ", the nearest true one " << 1e3 * nearest << " mm away by MSSD)";
   }
 }
 
@@ -432,28 +451,17 @@ TEST(Recognition, PartsHiddenByFitsOnOtherPartsAreFoundOnceThoseAreExplained) {
 // figure for this scene).
 TEST(Recognition, CoarsePosesFarFromPassingDoNotUseUpTheVerifications) {
   const auto kept = kept_scene("clutter-scene21");
-  std::map<std::string, LibraryModel> models;
-  SpinImageLibrary library;
-  for (const std::string name : {"tee", "elbow_90", "flange", "valve", "pipe_350"}) {
-    models[name] = library_model(name);
-    library.add_model(name, models[name].mesh);
-  }
-  RecognitionParams params;
-  params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
-  const auto result = recognize(kept.mesh, library, params);
+  const auto run = recognize_kept(kept, {"tee", "elbow_90", "flange", "valve", "pipe_350"});
   size_t true_instances = 0;
   for (const auto& o : kept.objects) {
-    const auto& m = models.at(o.model);
-    bool found = false;
-    for (const auto& inst : result.instances)
-      found |= inst.model == o.model && surface_distance(m.surface, *m.tree, o.T_sensor_object, inst.T_scene_model) < 0.1f * m.diameter;
+    const bool found = run.found(o);
     true_instances += found;
     std::printf("%s (%.0f%% occluded): %s\n", o.name.c_str(), 100 * (1 - o.visible_fraction), found ? "found" : "missed");
     if (o.name == "flange#1" || o.name == "elbow_90#1") {
       EXPECT_TRUE(found) << o.name << " was not found at its pose";
     }
   }
-  EXPECT_LE(result.instances.size(), true_instances + 1) << "more than one false instance";
+  EXPECT_LE(run.result.instances.size(), true_instances + 1) << "more than one false instance";
 }
 
 }  // namespace
