@@ -3,7 +3,9 @@
 // Scenes: N small tables with rims (0.56 x 0.44 m, all in the sensor's view; default 50), each with 3 to 8 instances of the five pipework library parts
 // and 2 to 5 distractors (boxes and cylinders), dropped with physics into piles, seen by one
 // simulated Minolta Vivid 700 from a random azimuth. The ground truth gives each instance's pose
-// and visible fraction (visible / unoccluded pixels, so occlusion = 1 - visible fraction).
+// and visible fraction (visible / unoccluded pixels, so occlusion = 1 - visible fraction; the
+// unoccluded pixels are counted on an image plane wider than the frame, so what the frame cuts
+// off counts as occluded: the tables are in view, but a pipe may reach beyond the frame).
 //
 // Scored per occlusion band (0-30%, 30-50%, 50-70%, 70-85%; instances occluded more are not
 // scored): an instance is found when a detection of its model is

@@ -77,6 +77,14 @@ std::vector<ObjectTruth> object_truth(Renderer& renderer, const Workcell& cell, 
   for (uint16_t id : instance_ids)
     if (id > 0 && id <= cell.bodies.size()) ++visible[id];
   std::vector<ObjectTruth> out;
+  // Alone, on an image plane three times as wide and high (same pixels, same principal ray): what
+  // lies outside the sensor's frame counts as hidden too. A pipe half out of the frame is half
+  // seen, not "0% occluded" (the recognition bench bands instances by this fraction).
+  PinholeCamera wide = camera;
+  wide.width = 3 * camera.width;
+  wide.height = 3 * camera.height;
+  wide.cx = camera.cx + camera.width;
+  wide.cy = camera.cy + camera.height;
   RenderOptions alone;
   alone.color = false;
   alone.depth = false;
@@ -91,7 +99,7 @@ std::vector<ObjectTruth> object_truth(Renderer& renderer, const Workcell& cell, 
     o.T_world_object = b.T_world_body;
     o.visible_pixels = visible[b.instance_id];
     alone.only_instance = b.instance_id;
-    const auto r = renderer.render(cell, camera, T_world_camera, alone);
+    const auto r = renderer.render(cell, wide, T_world_camera, alone);
     for (uint16_t id : r.instance_ids) o.unoccluded_pixels += id == b.instance_id;
     o.visible_fraction = o.unoccluded_pixels > 0 ? static_cast<double>(o.visible_pixels) / o.unoccluded_pixels : 0.0;
     out.push_back(std::move(o));

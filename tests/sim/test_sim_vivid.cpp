@@ -139,6 +139,33 @@ TEST(SimVivid, DeterministicForASeed) {
   EXPECT_EQ(a.range.sensor.kind, "minolta-vivid-700");
 }
 
+// Method: the ground truth's visible fraction counts what lies outside the sensor's frame as
+// hidden. A 10 cm cube 0.95 m in front of the camera (focal length 391.6 px, 200 px wide: the
+// frame's right edge is at x = 0.2553 z), centred on that edge, shows its left face (about 8 px
+// wide) and the left half of its front face (about 20 of 41 px) in the frame: 0.5 to 0.65 of
+// what it would show on a wider image plane. The same cube moved into the frame shows all of it;
+// moved out of it, nothing (and still covers pixels when rendered alone on the wider plane).
+TEST(SimVivid, VisibleFractionCountsWhatLiesOutsideTheFrameAsHidden) {
+  const double edge_x = 0.2553 * 0.95;
+  const auto fraction = [](double x, int* unoccluded = nullptr) {
+    auto cell = cell_of({wall_at(1.6), box_body("cube", {0.1, 0.1, 0.1}, at(x, 0.0, 1.0))});
+    Renderer renderer(cell);
+    const auto acq = scan_vivid(renderer, cell, Transform::Identity(), no_random_dropouts(), 3);
+    const auto& cube = acq.truth.objects.at(1);
+    EXPECT_EQ(cube.name, "cube");
+    if (unoccluded) *unoccluded = cube.unoccluded_pixels;
+    return cube.visible_fraction;
+  };
+  const double at_edge = fraction(edge_x);
+  std::printf("visible fraction of the cube on the frame's edge: %.3f\n", at_edge);
+  EXPECT_GT(at_edge, 0.5);
+  EXPECT_LT(at_edge, 0.65);
+  EXPECT_NEAR(fraction(0.0), 1.0, 1e-9);
+  int unoccluded = 0;
+  EXPECT_EQ(fraction(edge_x + 0.1, &unoccluded), 0.0);
+  EXPECT_GT(unoccluded, 1000);
+}
+
 // Method: out-of-range surfaces give no data: a wall at 3 m is beyond the 2.5 m standoff.
 TEST(SimVivid, NothingBeyondTheStandoff) {
   auto cell = cell_of({wall_at(3.0)});

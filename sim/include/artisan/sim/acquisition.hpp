@@ -29,7 +29,9 @@ struct ObjectTruth {
   BodyRole role = BodyRole::structure;
   Transform T_world_object = Transform::Identity();
   int visible_pixels = 0;        ///< pixels of this instance in the acquisition's instance image
-  int unoccluded_pixels = 0;     ///< pixels it covers when rendered alone from the same view
+  /// pixels it covers when rendered alone from the same view, on an image plane three times as
+  /// wide and high as the sensor's (what lies outside the frame is not seen either)
+  int unoccluded_pixels = 0;
   double visible_fraction = 0.0; ///< visible / unoccluded (0 when out of view)
 };
 
