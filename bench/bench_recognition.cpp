@@ -370,6 +370,9 @@ int main(int argc, char** argv) {
   std::mt19937 rng(20261122);
   std::vector<Instance> ours_all, ppf_all;
   int ours_fp = 0, ppf_fp = 0, scored_scenes = 0;
+  // Detections flagged ambiguous (another pose fits about as well): right ones, false ones, and
+  // false ones whose alternative pose is the right one.
+  int ambiguous_right = 0, ambiguous_false = 0, ambiguous_alternative_right = 0;
   double ours_s = 0, ppf_s = 0, sim_s = 0;
   json scenes = json::array();
   std::map<std::string, int> diagnosis;  // missed instances by the stage a pose near them reached
@@ -415,14 +418,28 @@ int main(int argc, char** argv) {
     auto ours_truth = truth;
     const int fp = score(ours_truth, ours, by_name);
     ours_fp += fp;
+    for (const auto& i : result.instances) {
+      if (!i.ambiguous) continue;
+      const auto right = [&](const Transform& T) {
+        return std::any_of(truth.begin(), truth.end(),
+                           [&](const Instance& inst) { return inst.model == i.model && symmetric_match(*by_name.at(i.model), inst.T_sensor_object, T); });
+      };
+      if (right(i.T_scene_model)) ++ambiguous_right;
+      else ++ambiguous_false, ambiguous_alternative_right += right(i.T_scene_model_alternative);
+    }
     for (const auto& i : scored(ours_truth)) ours_all.push_back(i);
     if (diagnose) {
+      const auto ambiguity = [&](const RecognizedInstance& i) {
+        if (!i.ambiguous) return std::string();
+        const double d = symmetric_distance(*by_name.at(i.model), i.T_scene_model, i.T_scene_model_alternative);
+        return " (ambiguous: the alternative " + std::to_string(int(std::lround(100 * d))) + "% of the diameter away)";
+      };
       for (const auto& i : result.instances) {
         bool matched = false;
         for (const auto& inst : truth) matched |= inst.model == i.model && symmetric_match(*by_name.at(i.model), inst.T_sensor_object, i.T_scene_model);
         if (matched)
-          std::fprintf(stderr, "  found %s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f\n", i.model.c_str(),
-                       i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction, i.continued_fraction);
+          std::fprintf(stderr, "  found %s%s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f\n", i.model.c_str(),
+                       ambiguity(i).c_str(), i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction, i.continued_fraction);
         else {
           double nearest = 1e9, angle = 0;
           Eigen::Vector3d axis = Eigen::Vector3d::Zero();  // of the turn from the instance, in its model frame
@@ -436,9 +453,9 @@ int main(int argc, char** argv) {
           }
           std::fprintf(stderr, "  nearest instance %s at %.1f mm, %.1f deg about (%.2f %.2f %.2f);", what.c_str(), nearest * 1e3, angle, axis.x(),
                        axis.y(), axis.z());
-          std::fprintf(stderr, "  false %s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f group %zu at %.3f %.3f %.3f\n",
-                       i.model.c_str(), i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction,
-                       i.continued_fraction, i.correspondences,
+          std::fprintf(stderr, "  false %s%s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f group %zu at %.3f %.3f %.3f\n",
+                       i.model.c_str(), ambiguity(i).c_str(), i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained,
+                       i.occluded_fraction, i.continued_fraction, i.correspondences,
                        i.T_scene_model.translation().x(), i.T_scene_model.translation().y(), i.T_scene_model.translation().z());
         }
       }
@@ -572,6 +589,8 @@ int main(int argc, char** argv) {
   out["criteria"] = "strict: 5 deg and 5 mm; symmetric: every model point within 10% of the diameter of the model surface at the true pose";
   out["artisan_spin_images"] = {{"bands", band_report(ours_all)},
                                 {"false_positives_per_scene", scored_scenes ? double(ours_fp) / scored_scenes : 0.0},
+                                {"ambiguous_detections", {{"right", ambiguous_right}, {"false", ambiguous_false},
+                                                          {"false_with_the_right_alternative", ambiguous_alternative_right}}},
                                 {"seconds_per_scene", scored_scenes ? ours_s / scored_scenes : 0.0}};
   if (with_ppf)
     out["opencv_ppf_icp"] = {{"bands", band_report(ppf_all)},

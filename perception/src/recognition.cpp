@@ -508,19 +508,34 @@ detail::TurnAxes find_turn_axes(const PointCloud& model) {
   return axes;
 }
 
+// A coarse pose (the coarse ICP's result) with its score: the model's share on the scene less
+// half the RMSE in resolutions.
+struct CoarsePose {
+  IcpResult icp;
+  double score;
+};
+double coarse_score(const IcpResult& r, double res) { return r.overlap_fraction - 0.5 * r.rmse_m / res; }
+
 // A pose of the model turned from T_scene_model about one of its turn axes (RecognitionParams::
 // turn_steps) that passes every test (`passes`, and not on an accepted instance: `taken`) and
 // scores more than `score` (T_scene_model's own: the model's share on the scene, less its share
-// in free space) by turn_margin; the best one, refined, or none.
+// in free space) by turn_margin; the best one, refined, or none. And every turn's coarse pose, for
+// the ambiguity test.
 struct Turned {
   IcpResult icp;
   FreeSpace::Check seen;
+  double coarse_score;
+};
+struct Turns {
+  std::optional<Turned> better;
+  std::vector<CoarsePose> coarse;
 };
 template <typename Passes, typename Taken>
-std::optional<Turned> better_turn(const PointCloud& model, const detail::TurnAxes& axes, const Transform& T_scene_model, double score, const PointCloud& scene,
-                                  const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& coarse, const IcpSettings& fine,
-                                  const RecognitionParams& params, const Passes& passes, const Taken& taken) {
-  if (params.turn_steps < 2) return std::nullopt;
+Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Transform& T_scene_model, double score, const PointCloud& scene,
+               const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& coarse, const IcpSettings& fine, const RecognitionParams& params,
+               double res, const Passes& passes, const Taken& taken) {
+  Turns out;
+  if (params.turn_steps < 2) return out;
   const auto steps = static_cast<size_t>(params.turn_steps);
   std::vector<Turned> turned(3 * (steps - 1));
   // Coarse ICP from every turn; the few that put most of the model on the scene, and more than
@@ -533,7 +548,9 @@ std::optional<Turned> better_turn(const PointCloud& model, const detail::TurnAxe
     const Transform T = T_scene_model * Eigen::Translation3d(axes.points[a]) *
                         Eigen::AngleAxisd(angle, axes.directions.col(static_cast<Eigen::Index>(a))) * Eigen::Translation3d(-axes.points[a]);
     turned[k].icp = icp_point_to_plane(model, scene, scene_tree, T, coarse);
+    turned[k].coarse_score = coarse_score(turned[k].icp, res);
   }
+  for (const auto& t : turned) out.coarse.push_back({t.icp, t.coarse_score});
   std::erase_if(turned, [&](const Turned& t) { return t.icp.overlap_fraction <= coarse_overlap + params.turn_margin; });
   std::sort(turned.begin(), turned.end(), [](const Turned& a, const Turned& b) { return a.icp.overlap_fraction > b.icp.overlap_fraction; });
   if (turned.size() > 3) turned.resize(3);
@@ -544,12 +561,11 @@ std::optional<Turned> better_turn(const PointCloud& model, const detail::TurnAxe
     turned[k].seen = free_space.check(model, turned[k].icp.T_target_source);
     ok[k] = passes(turned[k].icp, turned[k].seen);
   }
-  std::optional<Turned> best;
   for (size_t k = 0; k < turned.size(); ++k) {
     const double s = turned[k].icp.overlap_fraction - turned[k].seen.free_space;
-    if (ok[k] && s > score + params.turn_margin && !taken(turned[k].icp.T_target_source)) score = s, best = turned[k];
+    if (ok[k] && s > score + params.turn_margin && !taken(turned[k].icp.T_target_source)) score = s, out.better = turned[k];
   }
-  return best;
+  return out;
 }
 
 }  // namespace
@@ -835,11 +851,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     std::vector<Verified> verified;   ///< of the last search, best first
     std::optional<size_t> winner;     ///< into verified: the instance that search found
     std::vector<size_t> gain;         ///< the scene points the winner explains that no accepted instance does
-    struct CoarsePose {
-      Transform T;
-      double score, rmse_m;
-    };
-    std::vector<CoarsePose> coarse_poses;  ///< of the last search, best first, symmetric ones too: for the ambiguity test
+    /// of the last search and the winner's turns, best first, symmetric ones too: for the ambiguity test
+    std::vector<CoarsePose> coarse_poses;
   };
   // Starting poses: the groups' and the pair and voting hypotheses still open (one that lost half
   // its support to the surface accepted instances explain was on such an instance), ranked by
@@ -891,14 +904,14 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       PoseHypothesis& h = *st.origin;
       if (!h.coarse) h.coarse = icp_point_to_plane(model, scene_points, scene_tree, h.T_scene_model, coarse);
       const IcpResult& r = *h.coarse;
-      s.verified.push_back({r.T_target_source, r, r.overlap_fraction - 0.5 * r.rmse_m / res,
+      s.verified.push_back({r.T_target_source, r, coarse_score(r, res),
                             h.source == RecognitionCandidate::Source::grouping ? h.size : h.support, std::nullopt, &h});
     }
     std::sort(s.verified.begin(), s.verified.end(), [](const Verified& a, const Verified& b) { return a.score > b.score; });
     // Poses the coarse ICP brought together (the model's surface within 2 resolutions of where a
     // better one puts it) are refined once. All of them stay candidates for the ambiguity test.
     s.coarse_poses.clear();
-    for (const auto& v : s.verified) s.coarse_poses.push_back({v.T, v.score, v.icp.rmse_m});
+    for (const auto& v : s.verified) s.coarse_poses.push_back({v.icp, v.score});
     {
       std::vector<Verified> distinct;
       for (auto& v : s.verified) {
@@ -925,14 +938,19 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     if (!s.winner) return;
     // A part whose distinguishing piece is small (a valve's stem and hand wheel, a tee's branch)
     // also fits the scene with its large, nearly symmetric body (the run) turned about its axis
-    // and the piece where nothing contradicts it: the winner's turns compete with it.
+    // and the piece where nothing contradicts it: the winner's turns compete with it, and one
+    // that fits about as well makes it ambiguous.
     auto& w = s.verified[*s.winner];
-    if (const auto turn = better_turn(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, scene_points, scene_tree,
-                                      free_space, coarse, fine, params, passes, taken)) {
-      w.icp = turn->icp;
-      w.T = turn->icp.T_target_source;
-      w.seen = turn->seen;
+    auto turns = turns_of(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, scene_points, scene_tree, free_space,
+                          coarse, fine, params, res, passes, taken);
+    if (turns.better) {
+      w.icp = turns.better->icp;
+      w.T = turns.better->icp.T_target_source;
+      w.seen = turns.better->seen;
+      w.score = turns.better->coarse_score;
     }
+    s.coarse_poses.insert(s.coarse_poses.end(), std::make_move_iterator(turns.coarse.begin()), std::make_move_iterator(turns.coarse.end()));
+    std::stable_sort(s.coarse_poses.begin(), s.coarse_poses.end(), [](const CoarsePose& a, const CoarsePose& b) { return a.score > b.score; });
     s.gain = newly_explained(model, w.T);
   };
   // The last search's poses, for diagnosis (`accepted`: its winner was).
@@ -1001,13 +1019,24 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     found.visible_explained = top.seen->explained;
     found.occluded_fraction = top.seen->occluded;
     found.continued_fraction = top.seen->continued;
+    // Ambiguous: another pose at the same place that puts the model's surface elsewhere (not a
+    // turn about the part's own symmetry) puts nearly as much of the model on the scene (coarse
+    // ICP overlap) and passes the tests too; the best of the first three such.
+    const PointCloud& found_model = library.model_points(next->m);
+    const double overlap = icp_point_to_plane(found_model, scene_points, scene_tree, top.T, coarse).overlap_fraction;
+    std::vector<const CoarsePose*> rivals;
     for (const auto& other : next->coarse_poses) {
-      if (other.score < top.score - params.ambiguity_margin) break;
-      if (next->same->centre_distance(top.T, other.T) < 0.1 * next->same->diameter() &&
-          rotation_angle(top.T.inverse() * other.T) > 10.0 * std::numbers::pi / 180 && other.rmse_m <= params.max_rmse_factor * res) {
+      const Transform& T = other.icp.T_target_source;
+      if (other.icp.overlap_fraction >= (1 - params.ambiguity_margin) * overlap && other.icp.rmse_m <= params.max_rmse_factor * res &&
+          next->same->centre_distance(top.T, T) < 0.1 * next->same->diameter() && !(*next->same)(top.T, T, 0.1 * next->same->diameter()))
+        rivals.push_back(&other);
+    }
+    std::stable_sort(rivals.begin(), rivals.end(), [](const CoarsePose* a, const CoarsePose* b) { return a->icp.overlap_fraction > b->icp.overlap_fraction; });
+    for (size_t k = 0; k < rivals.size() && k < 3 && !found.ambiguous; ++k) {
+      const Transform& T = rivals[k]->icp.T_target_source;
+      if (passes(rivals[k]->icp, free_space.check(found_model, T)) && !on_accepted(found_model, T)) {
         found.ambiguous = true;
-        found.T_scene_model_alternative = other.T;
-        break;
+        found.T_scene_model_alternative = T;
       }
     }
     result.instances.push_back(found);

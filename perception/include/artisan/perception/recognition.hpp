@@ -144,7 +144,10 @@ struct RecognitionParams {
   /// refused: the same instance again, or another model fitted to part of it (instances are
   /// accepted in the order of how much scene surface they explain, across models)
   double max_shared_support = 0.3;
-  double ambiguity_margin = 0.05;      ///< [1] a different pose within this overlap of the best is an ambiguity
+  /// [1] a different pose at the same place (RecognizedInstance::ambiguous) that puts at least
+  /// 1 - ambiguity_margin of the found one's share of the model on the scene, and passes the
+  /// tests, is an ambiguity
+  double ambiguity_margin = 0.1;
   /// Where the sensors that saw the scene were, in the scene frame (one view for a single scan,
   /// one per merged scan). With views, a pose is refused when more than
   /// max_free_space_fraction of the model's surface facing a sensor lies in front of what that
@@ -189,7 +192,12 @@ struct RecognizedInstance {
   double visible_explained = 1.0;    ///< [1] share of the model surface the sensors should have seen, and nothing hid, that they saw
   double occluded_fraction = 0.0;    ///< [1] share of the model surface the sensors should have seen that something hid
   double continued_fraction = 0.0;   ///< [1] share of the explained surface the scene continues past the model's outline
-  bool ambiguous = false;         ///< another pose explains the scene almost as well (symmetry)
+  /// Another pose that puts the model's surface elsewhere (somewhere more than a tenth of its
+  /// diameter from it; a turn about the part's own symmetry, a flange's about its axis, is the same
+  /// surface) fits the scene almost as well (ambiguity_margin) and passes the visibility tests: a
+  /// coarse pose of the search at the same place, or a turn about one of its turn axes (a valve
+  /// whose stem and hand wheel are hidden).
+  bool ambiguous = false;
   Transform T_scene_model_alternative = Transform::Identity();  ///< that pose, when ambiguous
 };
 
