@@ -508,12 +508,8 @@ detail::TurnAxes find_turn_axes(const PointCloud& model) {
   return axes;
 }
 
-// A coarse pose (the coarse ICP's result) with its score: the model's share on the scene less
-// half the RMSE in resolutions.
-struct CoarsePose {
-  IcpResult icp;
-  double score;
-};
+// A coarse pose's score (the coarse ICP's result): the model's share on the scene less half the
+// RMSE in resolutions.
 double coarse_score(const IcpResult& r, double res) { return r.overlap_fraction - 0.5 * r.rmse_m / res; }
 
 // A pose of the model turned from T_scene_model about one of its turn axes (RecognitionParams::
@@ -528,7 +524,7 @@ struct Turned {
 };
 struct Turns {
   std::optional<Turned> better;
-  std::vector<CoarsePose> coarse;
+  std::vector<IcpResult> coarse;
 };
 template <typename Passes, typename Taken>
 Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Transform& T_scene_model, double score, const PointCloud& scene,
@@ -550,7 +546,7 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
     turned[k].icp = icp_point_to_plane(model, scene, scene_tree, T, coarse);
     turned[k].coarse_score = coarse_score(turned[k].icp, res);
   }
-  for (const auto& t : turned) out.coarse.push_back({t.icp, t.coarse_score});
+  for (const auto& t : turned) out.coarse.push_back(t.icp);
   std::erase_if(turned, [&](const Turned& t) { return t.icp.overlap_fraction <= coarse_overlap + params.turn_margin; });
   std::sort(turned.begin(), turned.end(), [](const Turned& a, const Turned& b) { return a.icp.overlap_fraction > b.icp.overlap_fraction; });
   if (turned.size() > 3) turned.resize(3);
@@ -851,8 +847,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     std::vector<Verified> verified;   ///< of the last search, best first
     std::optional<size_t> winner;     ///< into verified: the instance that search found
     std::vector<size_t> gain;         ///< the scene points the winner explains that no accepted instance does
-    /// of the last search and the winner's turns, best first, symmetric ones too: for the ambiguity test
-    std::vector<CoarsePose> coarse_poses;
+    std::vector<IcpResult> coarse_poses;  ///< of the last search and the winner's turns, symmetric ones too: for the ambiguity test
   };
   // Starting poses: the groups' and the pair and voting hypotheses still open (one that lost half
   // its support to the surface accepted instances explain was on such an instance), ranked by
@@ -911,7 +906,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // Poses the coarse ICP brought together (the model's surface within 2 resolutions of where a
     // better one puts it) are refined once. All of them stay candidates for the ambiguity test.
     s.coarse_poses.clear();
-    for (const auto& v : s.verified) s.coarse_poses.push_back({v.icp, v.score});
+    for (const auto& v : s.verified) s.coarse_poses.push_back(v.icp);
     {
       std::vector<Verified> distinct;
       for (auto& v : s.verified) {
@@ -949,8 +944,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       w.seen = turns.better->seen;
       w.score = turns.better->coarse_score;
     }
-    s.coarse_poses.insert(s.coarse_poses.end(), std::make_move_iterator(turns.coarse.begin()), std::make_move_iterator(turns.coarse.end()));
-    std::stable_sort(s.coarse_poses.begin(), s.coarse_poses.end(), [](const CoarsePose& a, const CoarsePose& b) { return a.score > b.score; });
+    s.coarse_poses.insert(s.coarse_poses.end(), turns.coarse.begin(), turns.coarse.end());
     s.gain = newly_explained(model, w.T);
   };
   // The last search's poses, for diagnosis (`accepted`: its winner was).
@@ -1024,17 +1018,17 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // ICP overlap) and passes the tests too; the best of the first three such.
     const PointCloud& found_model = library.model_points(next->m);
     const double overlap = icp_point_to_plane(found_model, scene_points, scene_tree, top.T, coarse).overlap_fraction;
-    std::vector<const CoarsePose*> rivals;
+    std::vector<const IcpResult*> rivals;
     for (const auto& other : next->coarse_poses) {
-      const Transform& T = other.icp.T_target_source;
-      if (other.icp.overlap_fraction >= (1 - params.ambiguity_margin) * overlap && other.icp.rmse_m <= params.max_rmse_factor * res &&
+      const Transform& T = other.T_target_source;
+      if (other.overlap_fraction >= (1 - params.ambiguity_margin) * overlap && other.rmse_m <= params.max_rmse_factor * res &&
           next->same->centre_distance(top.T, T) < 0.1 * next->same->diameter() && !(*next->same)(top.T, T, 0.1 * next->same->diameter()))
         rivals.push_back(&other);
     }
-    std::stable_sort(rivals.begin(), rivals.end(), [](const CoarsePose* a, const CoarsePose* b) { return a->icp.overlap_fraction > b->icp.overlap_fraction; });
+    std::stable_sort(rivals.begin(), rivals.end(), [](const IcpResult* a, const IcpResult* b) { return a->overlap_fraction > b->overlap_fraction; });
     for (size_t k = 0; k < rivals.size() && k < 3 && !found.ambiguous; ++k) {
-      const Transform& T = rivals[k]->icp.T_target_source;
-      if (passes(rivals[k]->icp, free_space.check(found_model, T)) && !on_accepted(found_model, T)) {
+      const Transform& T = rivals[k]->T_target_source;
+      if (passes(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model, T)) {
         found.ambiguous = true;
         found.T_scene_model_alternative = T;
       }
