@@ -418,14 +418,15 @@ int main(int argc, char** argv) {
     auto ours_truth = truth;
     const int fp = score(ours_truth, ours, by_name);
     ours_fp += fp;
+    // Whether a pose of a model is that of one of its true instances.
+    const auto at_true_pose = [&](const std::string& model, const Transform& T) {
+      return std::any_of(truth.begin(), truth.end(),
+                         [&](const Instance& inst) { return inst.model == model && symmetric_match(*by_name.at(model), inst.T_sensor_object, T); });
+    };
     for (const auto& i : result.instances) {
       if (!i.ambiguous) continue;
-      const auto right = [&](const Transform& T) {
-        return std::any_of(truth.begin(), truth.end(),
-                           [&](const Instance& inst) { return inst.model == i.model && symmetric_match(*by_name.at(i.model), inst.T_sensor_object, T); });
-      };
-      if (right(i.T_scene_model)) ++ambiguous_right;
-      else ++ambiguous_false, ambiguous_alternative_right += right(i.T_scene_model_alternative);
+      if (at_true_pose(i.model, i.T_scene_model)) ++ambiguous_right;
+      else ++ambiguous_false, ambiguous_alternative_right += at_true_pose(i.model, i.T_scene_model_alternative);
     }
     for (const auto& i : scored(ours_truth)) ours_all.push_back(i);
     if (diagnose) {
@@ -435,9 +436,7 @@ int main(int argc, char** argv) {
         return " (ambiguous: the alternative " + std::to_string(int(std::lround(100 * d))) + "% of the diameter away)";
       };
       for (const auto& i : result.instances) {
-        bool matched = false;
-        for (const auto& inst : truth) matched |= inst.model == i.model && symmetric_match(*by_name.at(i.model), inst.T_sensor_object, i.T_scene_model);
-        if (matched)
+        if (at_true_pose(i.model, i.T_scene_model))
           std::fprintf(stderr, "  found %s%s: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f\n", i.model.c_str(),
                        ambiguity(i).c_str(), i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained, i.occluded_fraction, i.continued_fraction);
         else {
