@@ -298,6 +298,10 @@ int main(int argc, char** argv) {
       else if (k == "coarse_refined") tuned.coarse_refined = int(v);
       else if (k == "max_instances") tuned.max_instances = int(v);
       else if (k == "max_continued_fraction") tuned.max_continued_fraction = v;
+      else if (k == "axis_hypotheses") tuned.axis_hypotheses = v != 0;
+      else if (k == "cylinder_min_share") library_params.cylinder_min_share = v;
+      else if (k == "axis_min_points") tuned.axis_min_points = size_t(v);
+      else if (k == "min_overlap_floor") tuned.min_overlap_floor = v;
       else {
         std::cerr << "bench_recognition: unknown parameter " << k << "\n";
         return 2;
@@ -510,6 +514,7 @@ int main(int argc, char** argv) {
           std::fprintf(stderr, " (%s) rank %d overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f group %zu",
                        best->source == RecognitionCandidate::Source::voting  ? "voting"
                        : best->source == RecognitionCandidate::Source::pairs ? "pairs"
+                       : best->source == RecognitionCandidate::Source::axis  ? "axis"
                                                                              : "grouping",
                        rank_best, best->overlap_fraction, best->rmse_m * 1e3, best->free_space_fraction, best->visible_explained, best->occluded_fraction,
                        best->continued_fraction, best->correspondences);

@@ -18,6 +18,7 @@
 #include "artisan/core/error.hpp"
 #include "artisan/perception/icp.hpp"
 #include "artisan/perception/kdtree.hpp"
+#include "axis_proposals.hpp"
 #include "correspondence_grouping.hpp"
 #include "point_pair_voting.hpp"
 
@@ -412,6 +413,30 @@ std::vector<PoseHypothesis> voting_hypotheses(const detail::PairFeatureModel& ta
   return made;
 }
 
+// Hypotheses of a model made mostly of one cylinder on the scene's cylinder axes of its radius
+// (RecognitionParams::axis_hypotheses), scored by SurfaceSupport: per axis, those with enough
+// support and at least 90% of the best there (a pipe partly hidden fits equally well at every
+// shift that keeps its seen part on the scene: the visibility tests choose among them).
+std::vector<PoseHypothesis> axis_hypotheses(const detail::ModelCylinder& cylinder, const std::vector<detail::SceneAxis>& axes,
+                                            const SurfaceSupport& surface_support, double res, const RecognitionParams& params) {
+  std::vector<PoseHypothesis> made;
+  const size_t min_support = surface_support.min_support(params.pair_min_support);
+  for (const auto& axis : axes) {
+    std::vector<PoseHypothesis> on;
+    size_t best = 0;
+    for (const auto& T : detail::poses_on_axis(cylinder, axis, params.axis_step_factor * res, params.turn_steps)) {
+      PoseHypothesis& h = on.emplace_back();
+      h.T_scene_model = T;
+      h.source = RecognitionCandidate::Source::axis;
+      h.first_support = h.support = surface_support.first(T, 1.5 * res);
+      best = std::max(best, h.support);
+    }
+    for (auto& h : on)
+      if (h.support >= min_support && 10 * h.support >= 9 * best) made.push_back(std::move(h));
+  }
+  return made;
+}
+
 // Whether two poses of a model put its surface in the same place: every one of a sample of its
 // points (evenly spread) at one pose lies within a tolerance of the model's surface at the
 // other. Poses that a symmetry of the model relates (a flange or a pipe turned about its axis)
@@ -615,7 +640,7 @@ void SpinImageLibrary::add_precomputed_model(const std::string& name, PointCloud
     throw Error("spin-image library: precomputed model \"" + name + "\" has " + std::to_string(images.rows()) + " x " +
                 std::to_string(images.cols()) + " spin images for " + std::to_string(points.points.size()) + " points; expected " +
                 std::to_string(bins()) + " rows");
-  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}});
+  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}, {}});
   compressed_ = false;
 }
 
@@ -643,7 +668,15 @@ void SpinImageLibrary::compress() {
   basis_ = eig.eigenvectors().rowwise().reverse().leftCols(k).cast<float>();
   for (auto& m : models_) {
     m.coefficients = project(m.images);
-    if (!m.turns) m.turns = std::make_shared<const detail::TurnAxes>(find_turn_axes(m.points));
+    if (!m.turns) {
+      m.turns = std::make_shared<const detail::TurnAxes>(find_turn_axes(m.points));
+      // The turn axis most of the model is a cylinder about, if any.
+      for (size_t a = 0; a < 3; ++a) {
+        const auto c = detail::model_cylinder(m.points, m.turns->points[a], m.turns->directions.col(static_cast<Eigen::Index>(a)), params_.resolution_m,
+                                              params_.cylinder_min_share);
+        if (c && (!m.cylinder || c->share > m.cylinder->share)) m.cylinder = std::make_shared<const detail::ModelCylinder>(*c);
+      }
+    }
     if (m.pairs) continue;
     detail::PairVotingParams voting;
     voting.step_m = std::max(params_.pair_min_step_factor * params_.resolution_m,
@@ -712,6 +745,7 @@ Eigen::MatrixXf SpinImageLibrary::project(const Eigen::MatrixXf& images) const {
 RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library, const RecognitionParams& params) {
   if (scene.faces.empty()) throw Error("recognition: the scene mesh has no faces");
   if (library.model_count() == 0) throw Error("recognition: the model library is empty");
+  if (!(params.axis_step_factor > 0)) throw Error("recognition: axis_step_factor " + std::to_string(params.axis_step_factor) + " must be positive");
   library.compress();
   RecognitionResult result;
   const double res = library.params().resolution_m;
@@ -813,8 +847,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   };
   // What something hid is not held against the overlap either; but what is seen must be more
   // than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
+  const auto required_overlap = [&](const FreeSpace::Check& seen) { return std::max(params.min_model_overlap * (1 - seen.occluded), params.min_overlap_floor); };
   const auto passes = [&](const IcpResult& icp, const FreeSpace::Check& seen) {
-    return icp.overlap_fraction >= params.min_model_overlap * (1 - seen.occluded) && icp.rmse_m <= params.max_rmse_factor * res &&
+    return icp.overlap_fraction >= required_overlap(seen) && icp.rmse_m <= params.max_rmse_factor * res &&
            seen.free_space <= params.max_free_space_fraction && seen.explained >= params.min_visible_explained &&
            seen.planarity <= params.max_support_planarity && seen.continued <= params.max_continued_fraction;
   };
@@ -822,7 +857,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // fraction of a resolution (on the clutter bench's first 12 scenes this screen let through all
   // 48 coarse poses that went on to pass, and stopped 482 of the 688 that failed).
   const auto promising = [&](const IcpResult& icp, const FreeSpace::Check& seen) {
-    return icp.overlap_fraction >= 0.5 * params.min_model_overlap * (1 - seen.occluded) && seen.free_space <= 2 * params.max_free_space_fraction &&
+    return icp.overlap_fraction >= 0.5 * required_overlap(seen) && seen.free_space <= 2 * params.max_free_space_fraction &&
            seen.explained >= params.min_visible_explained - 0.15 && seen.planarity <= params.max_support_planarity + 0.03 &&
            seen.continued <= 3 * params.max_continued_fraction;
   };
@@ -972,6 +1007,14 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     }
   };
 
+  // The scene's cylinder axes, per radius of the library's cylinder models.
+  std::vector<std::pair<double, std::vector<detail::SceneAxis>>> axes_of_radius;
+  const auto scene_axes = [&](double radius) -> const std::vector<detail::SceneAxis>& {
+    for (const auto& [r, axes] : axes_of_radius)
+      if (std::abs(r - radius) < 0.25 * res) return axes;
+    return axes_of_radius.emplace_back(radius, detail::scene_axes(scene_points, scene_tree, radius, res, free_space.background(), params.axis_min_points))
+        .second;
+  };
   std::vector<Search> searches(library.model_count());
   for (size_t m = 0; m < searches.size(); ++m) {
     auto& s = searches[m];
@@ -983,6 +1026,10 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     auto made = pair_hypotheses(model, scene_points, *s.surface_support, s.candidates, res, params);
     auto voted = voting_hypotheses(library.pair_features(m), scene_points, free_space.background(), *s.surface_support, res, params);
     made.insert(made.end(), std::make_move_iterator(voted.begin()), std::make_move_iterator(voted.end()));
+    if (const auto* cylinder = library.cylinder(m); cylinder && params.axis_hypotheses) {
+      auto on_axes = axis_hypotheses(*cylinder, scene_axes(cylinder->radius), *s.surface_support, res, params);
+      made.insert(made.end(), std::make_move_iterator(on_axes.begin()), std::make_move_iterator(on_axes.end()));
+    }
     for (auto& h : best_distinct(std::move(made), *s.same, static_cast<size_t>(std::max(params.pair_pool, 0)))) s.hypotheses.push_back(std::move(h));
   }
   while (true) {

@@ -19,6 +19,7 @@ namespace artisan {
 namespace detail {
 class PairFeatureModel;
 struct TurnAxes;
+struct ModelCylinder;
 }
 
 struct ModelLibraryParams {
@@ -30,6 +31,10 @@ struct ModelLibraryParams {
   /// pair_min_step_factor resolutions.
   double pair_step_fraction = 0.03;
   double pair_min_step_factor = 2.0;  ///< [resolutions]
+  /// A model with at least this share of its points on cylinders about one of its turn axes (a
+  /// straight pipe: its outside and bore) is also proposed on the scene's cylinder axes of its
+  /// radius (RecognitionParams::axis_hypotheses).
+  double cylinder_min_share = 0.8;
 };
 
 class SpinImageLibrary {
@@ -63,6 +68,8 @@ class SpinImageLibrary {
   const detail::PairFeatureModel& pair_features(size_t m) const { return *models_[m].pairs; }
   /// Model m's turn axes (RecognitionParams::turn_steps; made by compress()).
   const detail::TurnAxes& turn_axes(size_t m) const { return *models_[m].turns; }
+  /// Model m's cylinder (ModelLibraryParams::cylinder_min_share), or null (made by compress()).
+  const detail::ModelCylinder* cylinder(size_t m) const { return models_[m].cylinder.get(); }
 
   struct Match {
     float d2;  ///< squared distance between normalised images (2 - 2 x correlation)
@@ -81,6 +88,7 @@ class SpinImageLibrary {
     Eigen::MatrixXf coefficients;
     std::shared_ptr<const detail::PairFeatureModel> pairs;
     std::shared_ptr<const detail::TurnAxes> turns;
+    std::shared_ptr<const detail::ModelCylinder> cylinder;
   };
   ModelLibraryParams params_;
   std::vector<Model> models_;
@@ -125,6 +133,15 @@ struct RecognitionParams {
   /// model join the pair hypotheses, scored the same way.
   int voting_pool = 100;               ///< [1] best vote clusters per model that become hypotheses (0: no voting)
   int pair_pool = 200;                 ///< [1] best distinct pair and voting hypotheses kept per model
+  /// A model made mostly of one cylinder (SpinImageLibrary::cylinder, a pipe) is also put on
+  /// each axis of the scene's cylindrical surfaces of its radius, at every shift along it that
+  /// overlaps the seen extent (axis_step_factor resolutions apart; and, when it is not round,
+  /// at turn_steps turns about it); per axis the poses with nearly the best support (90%), the
+  /// best distinct of them joining the pair hypotheses. Spin images and point-pair voting seldom
+  /// place a pipe: its body's points and pairs all look alike, and only its rims fix the shift.
+  bool axis_hypotheses = true;
+  double axis_step_factor = 2.0;       ///< [resolutions]
+  size_t axis_min_points = 60;         ///< [1] scene points a cylinder axis needs
   /// [1] starting poses refined by the coarse ICP per instance search, of the groups and of the
   /// pair hypotheses each: those that put the most sampled model points on scene surface not yet
   /// explained
@@ -134,6 +151,11 @@ struct RecognitionParams {
   /// to 0.11 in the clutter bench); whether what a sensor should see of it is there is
   /// min_visible_explained's test.
   double min_model_overlap = 0.10;
+  /// [1] but never less than this, however much is hidden: a pose that hides nearly all of a
+  /// large part (a pipe 78% occluded along a tee's run end, 2.7% of it on the scene) can be put
+  /// wherever a little of its surface fits. True instances in the clutter bench showed at least
+  /// 0.077 (an elbow 60% occluded; 50 scenes, 177 found).
+  double min_overlap_floor = 0.05;
   /// [1] largest accepted residual, in resolutions. True instances in the simulated clutter bench
   /// fit within 0.61 mm (0.2 resolutions; 348 found in two 50-scene runs); a pipe fitted to
   /// another part's or a distractor's cylinder of a slightly different radius leaves 1.0-1.3 mm,
@@ -207,7 +229,7 @@ struct RecognitionCandidate {
   Transform T_scene_model = Transform::Identity();
   double overlap_fraction = 0, rmse_m = 0, free_space_fraction = 0, visible_explained = 1, occluded_fraction = 0, continued_fraction = 0;
   size_t correspondences = 0;     ///< in its group; for a pair or voting hypothesis, the sampled model points it put on the scene
-  enum class Source { grouping, pairs, voting } source = Source::grouping;
+  enum class Source { grouping, pairs, voting, axis } source = Source::grouping;
   /// proposed: a pair or voting hypothesis in the pool that no coarse ICP refined; coarse: refined
   /// by the coarse ICP only
   enum class Stage { proposed, coarse, refused, accepted } stage = Stage::coarse;
