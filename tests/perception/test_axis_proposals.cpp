@@ -22,7 +22,7 @@ namespace artisan {
 namespace {
 
 constexpr double kRes = 0.003;
-constexpr double kRadius = 0.0603 / 2;
+const double kRadius = sim::PipeSize{}.outer_diameter_m / 2;  // the simulator's DN50 pipe
 
 std::optional<detail::ModelCylinder> cylinder_about_z(const TriangleMesh& mesh, double min_share = 0.8) {
   return detail::model_cylinder(sample_surface(mesh, kRes), Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ(), kRes, min_share);
