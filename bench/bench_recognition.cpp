@@ -299,6 +299,7 @@ int main(int argc, char** argv) {
       else if (k == "max_instances") tuned.max_instances = int(v);
       else if (k == "max_continued_fraction") tuned.max_continued_fraction = v;
       else if (k == "axis_hypotheses") tuned.axis_hypotheses = v != 0;
+      else if (k == "drop_refused_planes") tuned.drop_refused_planes = v != 0;
       else if (k == "cylinder_min_share") library_params.cylinder_min_share = v;
       else if (k == "axis_min_points") tuned.axis_min_points = size_t(v);
       else if (k == "min_overlap_floor") tuned.min_overlap_floor = v;
@@ -460,6 +461,9 @@ int main(int argc, char** argv) {
                        i.model.c_str(), ambiguity(i).c_str(), i.overlap_fraction, i.rmse_m * 1e3, i.free_space_fraction, i.visible_explained,
                        i.occluded_fraction, i.continued_fraction, i.correspondences,
                        i.T_scene_model.translation().x(), i.T_scene_model.translation().y(), i.T_scene_model.translation().z());
+          const Transform T_world_model = acquisition.truth.T_world_sensor * i.T_scene_model;
+          std::fprintf(stderr, "    in the world at %.3f %.3f %.3f, its z axis %.2f %.2f %.2f\n", T_world_model.translation().x(), T_world_model.translation().y(),
+                       T_world_model.translation().z(), T_world_model.linear()(0, 2), T_world_model.linear()(1, 2), T_world_model.linear()(2, 2));
         }
       }
       if (!dump.empty())  // every pose of that model tried or proposed, and how far from the nearest true instance
@@ -468,8 +472,9 @@ int main(int argc, char** argv) {
           double nearest = 1e9;
           for (const auto& inst : truth)
             if (inst.model == dump) nearest = std::min(nearest, symmetric_distance(*by_name.at(inst.model), inst.T_sensor_object, c.T_scene_model));
-          std::fprintf(stderr, "    cand stage %d source %d support %zu overlap %.3f rmse %.2f nearest %.0f%% at %.3f %.3f %.3f\n", int(c.stage), int(c.source),
-                       c.correspondences, c.overlap_fraction, c.rmse_m * 1e3, 100 * nearest, c.T_scene_model.translation().x(),
+          std::fprintf(stderr, "    cand stage %d source %d support %zu overlap %.3f rmse %.2f free %.3f explained %.3f occluded %.3f continued %.3f planarity %.3f nearest %.0f%% at %.3f %.3f %.3f\n",
+                       int(c.stage), int(c.source), c.correspondences, c.overlap_fraction, c.rmse_m * 1e3, c.free_space_fraction, c.visible_explained,
+                       c.occluded_fraction, c.continued_fraction, c.support_planarity, 100 * nearest, c.T_scene_model.translation().x(),
                        c.T_scene_model.translation().y(), c.T_scene_model.translation().z());
         }
       // Each missed instance: the furthest stage a pose near it reached, and its figures.

@@ -883,6 +883,30 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     std::optional<size_t> winner;     ///< into verified: the instance that search found
     std::vector<size_t> gain;         ///< the scene points the winner explains that no accepted instance does
     std::vector<IcpResult> coarse_poses;  ///< of the last search and the winner's turns, symmetric ones too: for the ambiguity test
+    /// Scene points that no longer support this model: explained by an accepted instance, or under
+    /// a pose of it refused because what it lies on is one plane or carries on past its outline.
+    std::vector<char> unusable;
+  };
+  // A pose refused because what it lies on is one plane, or carries on past its outline: the scene
+  // surface under it, and when that is mostly one plane, the plane as far as the model reaches,
+  // no longer support the model (its face would slide or turn there).
+  const auto refused_on_plane = [&](Search& s, const Transform& T_scene_model, double planarity) {
+    const auto on = lies_on(library.model_points(s.m), T_scene_model);
+    for (const size_t p : on) s.unusable[p] = 1;
+    if (planarity < 0.85) return;
+    Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+    for (const size_t p : on) scatter += scene_points.normals[p].cast<double>() * scene_points.normals[p].cast<double>().transpose();
+    const Eigen::Vector3f n = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(scatter).eigenvectors().col(2).cast<float>();
+    Eigen::Vector3f centre = Eigen::Vector3f::Zero();
+    size_t in_plane = 0;
+    for (const size_t p : on)
+      if (std::abs(n.dot(scene_points.normals[p])) > 0.9f) centre += scene_points.points[p], ++in_plane;
+    if (in_plane == 0) return;
+    centre /= static_cast<float>(in_plane);
+    std::vector<size_t> near;
+    scene_tree.within(T_scene_model.translation().cast<float>(), static_cast<float>(s.same->diameter()), near);
+    for (const size_t p : near)
+      if (std::abs(n.dot(scene_points.points[p] - centre)) < static_cast<float>(2 * res) && std::abs(n.dot(scene_points.normals[p])) > 0.9f) s.unusable[p] = 1;
   };
   // Starting poses: the groups' and the pair and voting hypotheses still open (one that lost half
   // its support to the surface accepted instances explain was on such an instance), ranked by
@@ -902,14 +926,14 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         h.T_scene_model = g.T_target_source;
         h.source = RecognitionCandidate::Source::grouping;
         h.size = g.size;
-        h.first_support = (*s.surface_support)(h.T_scene_model, 2.0 * res, explained);
+        h.first_support = (*s.surface_support)(h.T_scene_model, 2.0 * res, s.unusable);
       }
     std::vector<Start> groups, pairs;
     for (auto& h : s.hypotheses) {
       if (h.done) continue;
       // Groups are scored with a wider margin: their coarser first pose only the ICP brings onto the surface.
       const bool group = h.source == RecognitionCandidate::Source::grouping;
-      h.support = (*s.surface_support)(h.T_scene_model, (group ? 2.0 : 1.5) * res, explained);
+      h.support = (*s.surface_support)(h.T_scene_model, (group ? 2.0 : 1.5) * res, s.unusable);
       if (2 * h.support < h.first_support) h.done = true;
       else (group ? groups : pairs).push_back({h.support, &h});
     }
@@ -956,11 +980,16 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     for (size_t k = 0; k < s.verified.size() && refined < static_cast<size_t>(std::max(params.max_candidates_verified, 0)); ++k) {
       auto& v = s.verified[k];
       v.origin->done = true;
+      // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
+      // or turned on a box top) would be refused again: not refined.
+      if (2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
       if (!promising(v.icp, v.seen.emplace(free_space.check(model, v.T)))) continue;
       ++refined;
       v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
       v.T = v.icp.T_target_source;
       const auto& seen = v.seen.emplace(free_space.check(model, v.T));
+      if (params.drop_refused_planes && (seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction))
+        refused_on_plane(s, v.T, seen.planarity);
       if (!passes(v.icp, seen) || taken(v.T)) continue;
       s.winner = k;
       break;
@@ -998,6 +1027,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         c.visible_explained = v.seen->explained;
         c.occluded_fraction = v.seen->occluded;
         c.continued_fraction = v.seen->continued;
+        c.support_planarity = v.seen->planarity;
       }
       c.source = v.origin->source;
       c.stage = accepted && s.winner == k ? RecognitionCandidate::Stage::accepted
@@ -1020,6 +1050,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     auto& s = searches[m];
     s.m = m;
     s.candidates = per_model[m];
+    s.unusable = explained;
     const PointCloud& model = library.model_points(m);
     s.surface_support = std::make_unique<SurfaceSupport>(model, params.pair_score_points, scene_points, scene_tree);
     s.same = std::make_unique<SameSurface>(model);
@@ -1081,7 +1112,10 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       }
     }
     result.instances.push_back(found);
-    for (const size_t s : next->gain) explained[s] = 1;
+    for (const size_t p : next->gain) {
+      explained[p] = 1;
+      for (auto& s : searches) s.unusable[p] = 1;
+    }
     ++next->instances;
     next->verified.clear();
     next->winner.reset();

@@ -187,6 +187,13 @@ struct RecognitionParams {
   /// plane the scene continues beyond the model's outline (no silhouette there: the model's
   /// face lies flush on a larger surface, such as a flange's face on a box's).
   double max_continued_fraction = 0.03;
+  /// A pose refused by either of the two tests above lies where no pose of the model would pass:
+  /// the scene surface under it, and when that is mostly one plane (planarity 0.85), the plane as
+  /// far as the model's diameter reaches, no longer support the model's other poses (they are
+  /// neither ranked among its starting poses nor refined). Without it a flange's face slid and
+  /// turned about a box top took every search's refinements, refused each time (clutter bench,
+  /// 50 scenes: 180 found instead of 177, the same 9 false positives, 12.5 s instead of 13.6).
+  bool drop_refused_planes = true;
   /// [1] an accepted pose is also tried turned about each of the model's principal directions
   /// (through the axis its surface is most nearly one of revolution about) by every multiple of
   /// 360/turn_steps degrees; a turn that passes every test and puts more of the model on the
@@ -228,6 +235,7 @@ struct RecognitionCandidate {
   size_t model_index = 0;
   Transform T_scene_model = Transform::Identity();
   double overlap_fraction = 0, rmse_m = 0, free_space_fraction = 0, visible_explained = 1, occluded_fraction = 0, continued_fraction = 0;
+  double support_planarity = 0;   ///< 1: the scene surface it explains is one plane
   size_t correspondences = 0;     ///< in its group; for a pair or voting hypothesis, the sampled model points it put on the scene
   enum class Source { grouping, pairs, voting, axis } source = Source::grouping;
   /// proposed: a pair or voting hypothesis in the pool that no coarse ICP refined; coarse: refined
