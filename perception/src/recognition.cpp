@@ -982,7 +982,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       v.origin->done = true;
       // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
       // or turned on a box top) would be refused again: not refined.
-      if (2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
+      if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
       if (!promising(v.icp, v.seen.emplace(free_space.check(model, v.T)))) continue;
       ++refined;
       v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
