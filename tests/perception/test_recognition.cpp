@@ -307,6 +307,11 @@ struct KeptScene {
     double visible_fraction;
   };
   std::vector<Object> objects;
+  /// The object of that name (model#n), or nullptr.
+  const Object* object(const std::string& name) const {
+    const auto it = std::find_if(objects.begin(), objects.end(), [&](const Object& o) { return o.name == name; });
+    return it == objects.end() ? nullptr : &*it;
+  }
 };
 KeptScene kept_scene(const std::string& name) {
   const auto dir = test::data_dir() / "recognition" / name;
@@ -365,6 +370,8 @@ struct KeptRecognition {
     });
   }
 };
+// The bench's five-part library.
+const std::vector<std::string> kBenchLibrary = {"tee", "elbow_90", "flange", "valve", "pipe_350"};
 KeptRecognition recognize_kept(const KeptScene& kept, const std::vector<std::string>& names, RecognitionParams params = {}) {
   KeptRecognition run;
   SpinImageLibrary library;
@@ -456,7 +463,7 @@ TEST(Recognition, PartsHiddenByFitsOnOtherPartsAreFoundOnceThoseAreExplained) {
 // figure for this scene).
 TEST(Recognition, CoarsePosesFarFromPassingDoNotUseUpTheVerifications) {
   const auto kept = kept_scene("clutter-scene21");
-  const auto run = recognize_kept(kept, {"tee", "elbow_90", "flange", "valve", "pipe_350"});
+  const auto run = recognize_kept(kept, kBenchLibrary);
   size_t true_instances = 0;
   for (const auto& o : kept.objects) {
     const bool found = run.found(o);
@@ -479,7 +486,7 @@ TEST(Recognition, CoarsePosesFarFromPassingDoNotUseUpTheVerifications) {
 // ambiguous instance's alternative must lie more than a tenth of the diameter (MSSD) from it.
 TEST(Recognition, AmbiguousOnlyWhenAnotherSurfaceFitsAsWell) {
   const auto kept = kept_scene("clutter-scene40");
-  const auto run = recognize_kept(kept, {"tee", "elbow_90", "flange", "valve", "pipe_350"});
+  const auto run = recognize_kept(kept, kBenchLibrary);
   bool valve_seen = false, flange_seen = false;
   for (const auto& inst : run.result.instances) {
     const auto& m = run.models.at(inst.model);
@@ -514,15 +521,12 @@ TEST(Recognition, AmbiguousOnlyWhenAnotherSurfaceFitsAsWell) {
 // (MSSD within 10% of its diameter), and every instance must be a true one.
 TEST(Recognition, APipeIsProposedOnTheSceneCylinderAxes) {
   const auto kept = kept_scene("clutter-scene27");
-  const std::vector<std::string> library = {"tee", "elbow_90", "flange", "valve", "pipe_350"};
-  const KeptScene::Object* pipe = nullptr;
-  for (const auto& o : kept.objects)
-    if (o.model == "pipe_350") pipe = &o;
+  const KeptScene::Object* pipe = kept.object("pipe_350#1");
   ASSERT_NE(pipe, nullptr);
   for (const bool axes : {false, true}) {
     RecognitionParams params;
     params.axis_hypotheses = axes;
-    const auto run = recognize_kept(kept, library, params);
+    const auto run = recognize_kept(kept, kBenchLibrary, params);
     std::printf("axis proposals %s: the pipe (%.0f%% occluded) %s, %zu instances\n", axes ? "on" : "off", 100 * (1 - pipe->visible_fraction),
                 run.found(*pipe) ? "found" : "missed", run.result.instances.size());
     if (!axes) {
@@ -548,19 +552,14 @@ TEST(Recognition, APipeIsProposedOnTheSceneCylinderAxes) {
 // their poses (MSSD within 10% of the diameter), and every instance must be a true one.
 TEST(Recognition, ARefusedPlaneNoLongerSupportsTheModel) {
   const auto kept = kept_scene("clutter-scene21");
-  const std::vector<std::string> library = {"tee", "elbow_90", "flange", "valve", "pipe_350"};
-  const KeptScene::Object *flange_ptr = nullptr, *pipe_ptr = nullptr;
-  for (const auto& o : kept.objects) {
-    if (o.name == "flange#3") flange_ptr = &o;
-    if (o.name == "pipe_350#1") pipe_ptr = &o;
-  }
+  const KeptScene::Object *flange_ptr = kept.object("flange#3"), *pipe_ptr = kept.object("pipe_350#1");
   ASSERT_NE(flange_ptr, nullptr);
   ASSERT_NE(pipe_ptr, nullptr);
   const auto &flange = *flange_ptr, &pipe = *pipe_ptr;
   for (const bool drop : {false, true}) {
     RecognitionParams params;
     params.drop_refused_planes = drop;
-    const auto run = recognize_kept(kept, library, params);
+    const auto run = recognize_kept(kept, kBenchLibrary, params);
     std::printf("dropping refused planes %s: the flange (%.0f%% occluded) %s, the pipe (%.0f%% occluded) %s, %zu instances\n", drop ? "on" : "off",
                 100 * (1 - flange.visible_fraction), run.found(flange) ? "found" : "missed", 100 * (1 - pipe.visible_fraction),
                 run.found(pipe) ? "found" : "missed", run.result.instances.size());
