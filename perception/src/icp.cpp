@@ -34,7 +34,7 @@ IcpResult icp_point_to_plane(const PointCloud& source, const PointCloud& target,
   const size_t step = std::max<size_t>(1, source.points.size() / std::max<size_t>(1, settings.max_source_points));
   std::vector<size_t> samples;
   for (size_t i = 0; i < source.points.size(); i += step) samples.push_back(i);
-  const float max_d2 = static_cast<float>(settings.max_correspondence_distance_m * settings.max_correspondence_distance_m);
+  const auto max_d = static_cast<float>(settings.max_correspondence_distance_m);
   const float min_cos = static_cast<float>(std::cos(settings.max_normal_angle_deg * M_PI / 180.0));
 
   IcpResult result;
@@ -57,8 +57,9 @@ IcpResult icp_point_to_plane(const PointCloud& source, const PointCloud& target,
       for (size_t k = 0; k < samples.size(); ++k) {
         const size_t i = samples[k];
         const Eigen::Vector3f p = R * source.points[i] + t;
-        const auto [j, d2] = target_tree.nearest(p);
-        if (d2 > max_d2) continue;
+        const auto near = target_tree.nearest_within(p, max_d);
+        if (!near) continue;
+        const size_t j = near->first;
         const Eigen::Vector3f& n = target.normals[j];
         if ((R * source.normals[i]).dot(n) < min_cos) continue;
         // Residual along the target normal; linearised rotation: (p x n) . w + n . dt.

@@ -1,5 +1,8 @@
 #include "artisan/perception/kdtree.hpp"
 
+#include <cmath>
+#include <limits>
+
 #include <nanoflann.hpp>
 
 namespace artisan {
@@ -35,6 +38,18 @@ std::pair<size_t, float> KdTree3::nearest(const Eigen::Vector3f& query) const {
   result.init(&index, &dist_sq);
   impl_->tree.findNeighbors(result, query.data(), nanoflann::SearchParams(32, 0.0f, false));
   return {index, dist_sq};
+}
+
+std::optional<std::pair<size_t, float>> KdTree3::nearest_within(const Eigen::Vector3f& query, float radius) const {
+  size_t index = 0;
+  float dist_sq = 0;
+  nanoflann::KNNResultSet<float, size_t> result(1);
+  result.init(&index, &dist_sq);
+  // The search takes a point only if it is nearer than this (and prunes the cells beyond it).
+  dist_sq = std::nextafter(radius * radius, std::numeric_limits<float>::infinity());
+  impl_->tree.findNeighbors(result, query.data(), nanoflann::SearchParams(32, 0.0f, false));
+  if (result.size() == 0) return std::nullopt;
+  return std::pair{index, dist_sq};
 }
 
 void KdTree3::within(const Eigen::Vector3f& query, float radius, std::vector<size_t>& indices) const {

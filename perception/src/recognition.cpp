@@ -108,9 +108,8 @@ class FreeSpace {
     std::vector<char> near(p.size(), 0);
     const auto near_scene = [&](size_t i) {
       if (!near[i]) {
-        const auto [j, d2] = tree_.nearest(p[i].cast<float>());
-        const double within = std::min(tolerance_, 2 * resolution_);
-        near[i] = d2 <= static_cast<float>(within * within) && !background_[j] ? 1 : 2;
+        const auto j = tree_.nearest_within(p[i].cast<float>(), static_cast<float>(std::min(tolerance_, 2 * resolution_)));
+        near[i] = j && !background_[j->first] ? 1 : 2;
       }
       return near[i] == 1;
     };
@@ -295,11 +294,10 @@ class SurfaceSupport {
   size_t first(const Transform& T_scene_model, double within_m) const { return (*this)(T_scene_model, within_m, nothing_explained_); }
   size_t operator()(const Transform& T_scene_model, double within_m, const std::vector<char>& explained) const {
     const Eigen::Isometry3f T = T_scene_model.cast<float>();
-    const float within2 = static_cast<float>(within_m * within_m);
     size_t on = 0;
     for (const size_t i : sample_) {
-      const auto [j, d2] = tree_.nearest(T * model_.points[i]);
-      on += d2 <= within2 && !explained[j] && (T.linear() * model_.normals[i]).dot(scene_.normals[j]) >= 0.7f;
+      const auto j = tree_.nearest_within(T * model_.points[i], static_cast<float>(within_m));
+      on += j && !explained[j->first] && (T.linear() * model_.normals[i]).dot(scene_.normals[j->first]) >= 0.7f;
     }
     return on;
   }
@@ -458,8 +456,7 @@ class SameSurface {
     // The centroid of the surface first (cheap): a symmetry keeps it.
     if (centre_distance(a, b) > tolerance_m) return false;
     const Eigen::Isometry3f T = (b.inverse() * a).cast<float>();
-    const auto tolerance2 = static_cast<float>(tolerance_m * tolerance_m);
-    return std::all_of(sample_.begin(), sample_.end(), [&](const Eigen::Vector3f& x) { return tree_.nearest(T * x).second <= tolerance2; });
+    return std::all_of(sample_.begin(), sample_.end(), [&](const Eigen::Vector3f& x) { return tree_.nearest_within(T * x, static_cast<float>(tolerance_m)).has_value(); });
   }
 
  private:

@@ -59,11 +59,9 @@ struct Constraint {
 
 Constraint constraint(const PointCloud& src, const PointCloud& tgt, const KdTree3& tree, const Transform& T, double max_distance) {
   std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> pairs;
-  const float max_sq = float(max_distance * max_distance);
   for (size_t i = 0; i < src.points.size(); ++i) {
     const Eigen::Vector3f p = (T * src.points[i].cast<double>()).cast<float>();
-    const auto [j, d2] = tree.nearest(p);
-    if (d2 <= max_sq) pairs.emplace_back(p.cast<double>(), tgt.normals[j].cast<double>());
+    if (const auto j = tree.nearest_within(p, float(max_distance))) pairs.emplace_back(p.cast<double>(), tgt.normals[j->first].cast<double>());
   }
   Constraint c;
   if (pairs.size() < 6) return c;

@@ -2,6 +2,7 @@
 // A 3-D k-d tree (nanoflann, compiled once in kdtree.cpp) for closest-point and support queries.
 #include <cstddef>
 #include <memory>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -19,6 +20,9 @@ class KdTree3 {
 
   /// Index of the nearest point and its squared distance [m^2]; the tree must not be empty.
   std::pair<size_t, float> nearest(const Eigen::Vector3f& query) const;
+  /// The same among the points at most `radius` [m] from `query`, or none. The search only visits
+  /// cells that close: a query far from every point (an ICP outlier) costs little.
+  std::optional<std::pair<size_t, float>> nearest_within(const Eigen::Vector3f& query, float radius) const;
   /// Indices of every point within `radius` [m] of `query` (cleared first), unordered.
   void within(const Eigen::Vector3f& query, float radius, std::vector<size_t>& indices) const;
   const std::vector<Eigen::Vector3f>& points() const;
