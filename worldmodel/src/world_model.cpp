@@ -86,7 +86,7 @@ TriangleMesh cut_out(const TriangleMesh& environment, const std::vector<PlacedMe
   }
   const KdTree3 tree(std::move(points));
   std::vector<char> near(environment.vertices.size());
-  for (size_t i = 0; i < near.size(); ++i) near[i] = tree.nearest(environment.vertices[i]).second <= float(reach * reach);
+  for (size_t i = 0; i < near.size(); ++i) near[i] = tree.nearest_within(environment.vertices[i], float(reach)).has_value();
   TriangleMesh out;
   std::vector<int> remap(environment.vertices.size(), -1);
   for (const auto& f : environment.faces) {
