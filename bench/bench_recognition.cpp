@@ -303,6 +303,7 @@ int main(int argc, char** argv) {
       else if (k == "cylinder_min_share") library_params.cylinder_min_share = v;
       else if (k == "axis_min_points") tuned.axis_min_points = size_t(v);
       else if (k == "min_overlap_floor") tuned.min_overlap_floor = v;
+      else if (k == "max_incidence_deg") tuned.max_incidence_deg = v;
       else {
         std::cerr << "bench_recognition: unknown parameter " << k << "\n";
         return 2;
@@ -514,7 +515,11 @@ int main(int argc, char** argv) {
                                   : best->stage == RecognitionCandidate::Stage::coarse   ? "refined-coarse-only"
                                                                                          : "refused";
         ++diagnosis[stage];
-        std::fprintf(stderr, "  missed %s (%.0f%% occluded): %s", inst.model.c_str(), 100 * (1 - inst.visible), stage.c_str());
+        const Transform T_world_truth = acquisition.truth.T_world_sensor * inst.T_sensor_object;
+        std::fprintf(stderr, "  missed %s (%.0f%% occluded, at %.3f %.3f %.3f, in the world its z axis %.2f %.2f %.2f): %s", inst.model.c_str(),
+                     100 * (1 - inst.visible), inst.T_sensor_object.translation().x(), inst.T_sensor_object.translation().y(),
+                     inst.T_sensor_object.translation().z(), T_world_truth.linear()(0, 2), T_world_truth.linear()(1, 2), T_world_truth.linear()(2, 2),
+                     stage.c_str());
         if (best)
           std::fprintf(stderr, " (%s) rank %d overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f group %zu",
                        best->source == RecognitionCandidate::Source::voting  ? "voting"

@@ -183,6 +183,15 @@ struct RecognitionParams {
   /// largest eigenvalue of their mean outer product, 1 for a plane, must stay below this).
   double max_support_planarity = 0.95;
   double free_space_tolerance_factor = 3.0;  ///< [resolutions] how far in front of the seen surface counts
+  /// [deg] model surface meeting a sensor's rays at a larger angle (between its normal and the
+  /// ray) is no evidence either way: a scanner returns little or nothing there (the Vivid 700
+  /// drops points from 60 degrees of incidence and all of them from 80), so the surface is
+  /// neither expected to be seen nor, where the sensor saw past it, in free space. At 90 (the
+  /// default, every sensor-facing point counts) a flange seen edge-on leaves a tenth of its
+  /// surface "in free space" at its true pose and is refused. Clutter bench (50 scenes) at 70:
+  /// 181 found instead of 180 (5 found that were missed, among them edge-on flanges; 3 lost,
+  /// not yet diagnosed), 10 false positives instead of 9; not yet the default.
+  double max_incidence_deg = 90.0;
   /// With perspective views: the largest share of the explained model surface whose tangent
   /// plane the scene continues beyond the model's outline (no silhouette there: the model's
   /// face lies flush on a larger surface, such as a flange's face on a box's).
