@@ -744,6 +744,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   if (scene.faces.empty()) throw Error("recognition: the scene mesh has no faces");
   if (library.model_count() == 0) throw Error("recognition: the model library is empty");
   if (!(params.axis_step_factor > 0)) throw Error("recognition: axis_step_factor " + std::to_string(params.axis_step_factor) + " must be positive");
+  if (!(params.max_incidence_deg > 0 && params.max_incidence_deg <= 90))
+    throw Error("recognition: max_incidence_deg " + std::to_string(params.max_incidence_deg) + " must lie in (0, 90]");
   library.compress();
   RecognitionResult result;
   const double res = library.params().resolution_m;

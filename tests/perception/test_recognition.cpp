@@ -292,6 +292,11 @@ TEST(Recognition, BadInputThrows) {
   RecognitionParams no_step;
   no_step.axis_step_factor = 0;
   EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), no_step), Error);
+  for (const double incidence : {0.0, 95.0, std::numeric_limits<double>::quiet_NaN()}) {
+    RecognitionParams bad_incidence;
+    bad_incidence.max_incidence_deg = incidence;
+    EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad_incidence), Error) << incidence;
+  }
   SpinImageLibrary lib;
   lib.add_model("bunny", scan_mesh("bun000"));
   EXPECT_THROW(lib.add_model("bunny", scan_mesh("bun000")), Error);  // duplicate name
