@@ -16,6 +16,19 @@ struct Cloud {
   bool kdtree_get_bbox(Box&) const { return false; }
 };
 using Tree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, Cloud>, Cloud, 3, size_t>;
+
+// The nearest point nearer than sqrt(worst_sq) (nanoflann's k-NN search prunes the cells beyond
+// it), or none.
+std::optional<std::pair<size_t, float>> nearest_below(const Tree& tree, const Eigen::Vector3f& query, float worst_sq) {
+  size_t index = 0;
+  float dist_sq = 0;
+  nanoflann::KNNResultSet<float, size_t> result(1);
+  result.init(&index, &dist_sq);
+  dist_sq = worst_sq;
+  tree.findNeighbors(result, query.data(), nanoflann::SearchParams(32, 0.0f, false));
+  if (result.size() == 0) return std::nullopt;
+  return std::pair{index, dist_sq};
+}
 }  // namespace
 
 struct KdTree3::Impl {
@@ -32,24 +45,13 @@ KdTree3::KdTree3(KdTree3&&) noexcept = default;
 KdTree3& KdTree3::operator=(KdTree3&&) noexcept = default;
 
 std::pair<size_t, float> KdTree3::nearest(const Eigen::Vector3f& query) const {
-  size_t index = 0;
-  float dist_sq = 0;
-  nanoflann::KNNResultSet<float, size_t> result(1);
-  result.init(&index, &dist_sq);
-  impl_->tree.findNeighbors(result, query.data(), nanoflann::SearchParams(32, 0.0f, false));
-  return {index, dist_sq};
+  constexpr float kNone = std::numeric_limits<float>::infinity();  // a query no point is nearer than (NaN)
+  return nearest_below(impl_->tree, query, kNone).value_or(std::pair<size_t, float>{0, kNone});
 }
 
 std::optional<std::pair<size_t, float>> KdTree3::nearest_within(const Eigen::Vector3f& query, float radius) const {
-  size_t index = 0;
-  float dist_sq = 0;
-  nanoflann::KNNResultSet<float, size_t> result(1);
-  result.init(&index, &dist_sq);
-  // The search takes a point only if it is nearer than this (and prunes the cells beyond it).
-  dist_sq = std::nextafter(radius * radius, std::numeric_limits<float>::infinity());
-  impl_->tree.findNeighbors(result, query.data(), nanoflann::SearchParams(32, 0.0f, false));
-  if (result.size() == 0) return std::nullopt;
-  return std::pair{index, dist_sq};
+  // A point exactly at the radius is taken.
+  return nearest_below(impl_->tree, query, std::nextafter(radius * radius, std::numeric_limits<float>::infinity()));
 }
 
 void KdTree3::within(const Eigen::Vector3f& query, float radius, std::vector<size_t>& indices) const {

@@ -375,6 +375,12 @@ struct KeptRecognition {
     });
   }
 };
+// Every instance lies at a true object of its model (MSSD within 10% of the diameter).
+void expect_every_instance_true(const KeptRecognition& run, const KeptScene& kept) {
+  for (const auto& inst : run.result.instances) {
+    EXPECT_LT(run.nearest_true(kept, inst), 0.1f * run.models.at(inst.model).diameter) << "false " << inst.model;
+  }
+}
 // The bench's five-part library.
 const std::vector<std::string> kBenchLibrary = {"tee", "elbow_90", "flange", "valve", "pipe_350"};
 KeptRecognition recognize_kept(const KeptScene& kept, const std::vector<std::string>& names, RecognitionParams params = {}) {
@@ -539,9 +545,7 @@ TEST(Recognition, APipeIsProposedOnTheSceneCylinderAxes) {
       continue;
     }
     EXPECT_TRUE(run.found(*pipe)) << "the pipe was not found at its pose";
-    for (const auto& inst : run.result.instances) {
-      EXPECT_LT(run.nearest_true(kept, inst), 0.1f * run.models.at(inst.model).diameter) << "false " << inst.model;
-    }
+    expect_every_instance_true(run, kept);
   }
 }
 
@@ -574,9 +578,7 @@ TEST(Recognition, ARefusedPlaneNoLongerSupportsTheModel) {
     }
     EXPECT_TRUE(run.found(flange)) << "the flange was not found at its pose";
     EXPECT_TRUE(run.found(pipe)) << "the pipe was not found at its pose";
-    for (const auto& inst : run.result.instances) {
-      EXPECT_LT(run.nearest_true(kept, inst), 0.1f * run.models.at(inst.model).diameter) << "false " << inst.model;
-    }
+    expect_every_instance_true(run, kept);
   }
 }
 
@@ -607,9 +609,7 @@ TEST(Recognition, ASurfaceAtGrazingIncidenceIsNoEvidenceAgainstAPose) {
       continue;
     }
     EXPECT_TRUE(run.found(flange)) << "the edge-on flange was not found at its pose";
-    for (const auto& inst : run.result.instances) {
-      EXPECT_LT(run.nearest_true(kept, inst), 0.1f * run.models.at(inst.model).diameter) << "false " << inst.model;
-    }
+    expect_every_instance_true(run, kept);
   }
 }
 }  // namespace
