@@ -292,6 +292,7 @@ int main(int argc, char** argv) {
       else if (k == "pair_score_points") tuned.pair_score_points = int(v);
       else if (k == "pair_min_support") tuned.pair_min_support = v;
       else if (k == "pair_pool") tuned.pair_pool = int(v);
+      else if (k == "axis_slide_steps") tuned.axis_slide_steps = int(v);
       else if (k == "voting_pool") tuned.voting_pool = int(v);
       else if (k == "max_rmse_factor") tuned.max_rmse_factor = v;
       else if (k == "pair_step_fraction") library_params.pair_step_fraction = v;

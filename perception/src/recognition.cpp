@@ -540,13 +540,13 @@ double coarse_score(const IcpResult& r, double res) { return r.overlap_fraction 
 // scores more than `score` (T_scene_model's own: the model's share on the scene, less its share
 // in free space) by turn_margin; the best one, refined, or none. And every turn's coarse pose, for
 // the ambiguity test.
-struct Turned {
+struct Moved {
   IcpResult icp;
   FreeSpace::Check seen;
   double coarse_score;
 };
 struct Turns {
-  std::optional<Turned> better;
+  std::optional<Moved> better;
   std::vector<IcpResult> coarse;
 };
 template <typename Passes, typename Taken>
@@ -556,7 +556,7 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
   Turns out;
   if (params.turn_steps < 2) return out;
   const auto steps = static_cast<size_t>(params.turn_steps);
-  std::vector<Turned> turned(3 * (steps - 1));
+  std::vector<Moved> turned(3 * (steps - 1));
   // Coarse ICP from every turn; the few that put most of the model on the scene, and more than
   // the coarse ICP does from the pose itself, are refined and checked.
   const double coarse_overlap = icp_point_to_plane(model, scene, scene_tree, T_scene_model, coarse).overlap_fraction;
@@ -570,8 +570,8 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
     turned[k].coarse_score = coarse_score(turned[k].icp, res);
   }
   for (const auto& t : turned) out.coarse.push_back(t.icp);
-  std::erase_if(turned, [&](const Turned& t) { return t.icp.overlap_fraction <= coarse_overlap + params.turn_margin; });
-  std::sort(turned.begin(), turned.end(), [](const Turned& a, const Turned& b) { return a.icp.overlap_fraction > b.icp.overlap_fraction; });
+  std::erase_if(turned, [&](const Moved& t) { return t.icp.overlap_fraction <= coarse_overlap + params.turn_margin; });
+  std::sort(turned.begin(), turned.end(), [](const Moved& a, const Moved& b) { return a.icp.overlap_fraction > b.icp.overlap_fraction; });
   if (turned.size() > 3) turned.resize(3);
   std::vector<char> ok(turned.size(), 0);
 #pragma omp parallel for schedule(dynamic, 1)
@@ -585,6 +585,30 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
     if (ok[k] && s > score + params.turn_margin && !taken(turned[k].icp.T_target_source)) score = s, out.better = turned[k];
   }
   return out;
+}
+
+// A straight pipe's pose (a model with a cylinder) slid along its axis by every whole number of
+// resolutions up to `steps` either way, each refined by the fine ICP; of those that pass every
+// test (`passes`), the one with the most of the model on the scene less its share in free
+// space, or none. Point-to-plane ICP hardly holds a pipe's place along its axis (only its rims
+// do): a pose a few millimetres short of the seen end leaves the scene's pipe carrying on past
+// the model's outline, one beyond it puts the end in free space.
+template <typename Passes>
+std::optional<Moved> slid_along_axis(const PointCloud& model, const detail::ModelCylinder& cylinder, const Transform& T_scene_model, const PointCloud& scene,
+                                     const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine, int steps, double res, const Passes& passes) {
+  if (steps < 1) return std::nullopt;
+  std::vector<Moved> slid(2 * static_cast<size_t>(steps));
+#pragma omp parallel for schedule(dynamic, 1)
+  for (size_t k = 0; k < slid.size(); ++k) {
+    const int shift = (k % 2 ? -1 : 1) * static_cast<int>(k / 2 + 1);
+    const Transform T = T_scene_model * Eigen::Translation3d(cylinder.direction * (shift * res));
+    slid[k].icp = icp_point_to_plane(model, scene, scene_tree, T, fine);
+    slid[k].seen = free_space.check(model, slid[k].icp.T_target_source);
+  }
+  std::optional<Moved> best;
+  for (const auto& m : slid)
+    if (passes(m.icp, m.seen) && (!best || m.icp.overlap_fraction - m.seen.free_space > best->icp.overlap_fraction - best->seen.free_space)) best = m;
+  return best;
 }
 
 }  // namespace
@@ -862,6 +886,13 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
            seen.explained >= params.min_visible_explained - 0.15 && seen.planarity <= params.max_support_planarity + 0.03 &&
            seen.continued <= 3 * params.max_continued_fraction;
   };
+  // Refused by a small margin on the visibility tests alone (a pose a few millimetres off
+  // along a pipe's axis: its end in free space, or short of the seen end).
+  const auto near_passing = [&](const IcpResult& icp, const FreeSpace::Check& seen) {
+    return icp.overlap_fraction >= required_overlap(seen) && icp.rmse_m <= params.max_rmse_factor * res &&
+           seen.free_space <= 2 * params.max_free_space_fraction && seen.explained >= params.min_visible_explained - 0.1 &&
+           seen.planarity <= params.max_support_planarity && seen.continued <= 3 * params.max_continued_fraction;
+  };
   struct Verified {
     Transform T;
     IcpResult icp;
@@ -988,7 +1019,16 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       ++refined;
       v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
       v.T = v.icp.T_target_source;
-      const auto& seen = v.seen.emplace(free_space.check(model, v.T));
+      v.seen.emplace(free_space.check(model, v.T));
+      // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
+      // what keeps the pose from passing.
+      if (const auto* cylinder = library.cylinder(s.m); cylinder && !passes(v.icp, *v.seen) && near_passing(v.icp, *v.seen))
+        if (auto slid = slid_along_axis(model, *cylinder, v.T, scene_points, scene_tree, free_space, fine, params.axis_slide_steps, res, passes)) {
+          v.icp = slid->icp;
+          v.T = slid->icp.T_target_source;
+          v.seen = slid->seen;
+        }
+      const auto& seen = *v.seen;
       if (params.drop_refused_planes && (seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction))
         refused_on_plane(s, v.T, seen.planarity);
       if (!passes(v.icp, seen) || taken(v.T)) continue;
