@@ -535,16 +535,18 @@ detail::TurnAxes find_turn_axes(const PointCloud& model) {
 // RMSE in resolutions.
 double coarse_score(const IcpResult& r, double res) { return r.overlap_fraction - 0.5 * r.rmse_m / res; }
 
+// A pose moved from another (turned about an axis, slid along one), refined and checked.
+struct Moved {
+  IcpResult icp;
+  FreeSpace::Check seen;
+  double coarse_score = 0;  ///< of its coarse pose (turns)
+};
+
 // A pose of the model turned from T_scene_model about one of its turn axes (RecognitionParams::
 // turn_steps) that passes every test (`passes`, and not on an accepted instance: `taken`) and
 // scores more than `score` (T_scene_model's own: the model's share on the scene, less its share
 // in free space) by turn_margin; the best one, refined, or none. And every turn's coarse pose, for
 // the ambiguity test.
-struct Moved {
-  IcpResult icp;
-  FreeSpace::Check seen;
-  double coarse_score;
-};
 struct Turns {
   std::optional<Moved> better;
   std::vector<IcpResult> coarse;

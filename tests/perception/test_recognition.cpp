@@ -395,6 +395,32 @@ KeptRecognition recognize_kept(const KeptScene& kept, const std::vector<std::str
   return run;
 }
 
+// A change tested on a kept scene (the five-part library, as the bench recognizes it): without
+// it (`without`) the object `missed` must be missed - the test fails if it is found, as the
+// scene would no longer test the change; with it (`with`) every object in `found` must be found
+// at its pose (MSSD within 10% of the diameter), and every instance must be a true one.
+void expect_found_only_with(const std::string& scene, const std::string& missed, const std::vector<std::string>& found, const std::string& change,
+                            const RecognitionParams& without, const RecognitionParams& with) {
+  const auto kept = kept_scene(scene);
+  for (const auto& name : found) ASSERT_NE(kept.object(name), nullptr) << name;
+  ASSERT_NE(kept.object(missed), nullptr) << missed;
+  const auto describe = [&](const KeptRecognition& run, const std::string& name) {
+    const auto& o = *kept.object(name);
+    return name + " (" + std::to_string(std::lround(100 * (1 - o.visible_fraction))) + "% occluded) " + (run.found(o) ? "found" : "missed");
+  };
+  const auto before = recognize_kept(kept, kBenchLibrary, without);
+  std::printf("%s, without: %s, %zu instances\n", scene.c_str(), describe(before, missed).c_str(), before.result.instances.size());
+  EXPECT_FALSE(before.found(*kept.object(missed))) << missed << " found without " << change << ": the scene no longer tests it";
+  const auto after = recognize_kept(kept, kBenchLibrary, with);
+  std::printf("%s, with %s:", scene.c_str(), change.c_str());
+  for (const auto& name : found) std::printf(" %s;", describe(after, name).c_str());
+  std::printf(" %zu instances\n", after.result.instances.size());
+  for (const auto& name : found) {
+    EXPECT_TRUE(after.found(*kept.object(name))) << name << " was not found at its pose";
+  }
+  expect_every_instance_true(after, kept);
+}
+
 // A valve's body and ends are nearly a surface of revolution about its run; only its stem and
 // hand wheel say how far it is turned about it. Method: bench_recognition's scene 9
 // (data/recognition/clutter-scene9: eight parts and distractors piled on a table, one simulated
@@ -531,22 +557,9 @@ TEST(Recognition, AmbiguousOnlyWhenAnotherSurfaceFitsAsWell) {
 // the axis proposals the pipe is not found (no pose near it); with them it must be, at its pose
 // (MSSD within 10% of its diameter), and every instance must be a true one.
 TEST(Recognition, APipeIsProposedOnTheSceneCylinderAxes) {
-  const auto kept = kept_scene("clutter-scene27");
-  const KeptScene::Object* pipe = kept.object("pipe_350#1");
-  ASSERT_NE(pipe, nullptr);
-  for (const bool axes : {false, true}) {
-    RecognitionParams params;
-    params.axis_hypotheses = axes;
-    const auto run = recognize_kept(kept, kBenchLibrary, params);
-    std::printf("axis proposals %s: the pipe (%.0f%% occluded) %s, %zu instances\n", axes ? "on" : "off", 100 * (1 - pipe->visible_fraction),
-                run.found(*pipe) ? "found" : "missed", run.result.instances.size());
-    if (!axes) {
-      EXPECT_FALSE(run.found(*pipe)) << "found without the axis proposals: the scene no longer tests them";
-      continue;
-    }
-    EXPECT_TRUE(run.found(*pipe)) << "the pipe was not found at its pose";
-    expect_every_instance_true(run, kept);
-  }
+  RecognitionParams without;
+  without.axis_hypotheses = false;
+  expect_found_only_with("clutter-scene27", "pipe_350#1", {"pipe_350#1"}, "axis proposals", without, {});
 }
 
 // A flange's face fits any flat surface at every slide and turn; in a crowded scene such fits
@@ -560,26 +573,9 @@ TEST(Recognition, APipeIsProposedOnTheSceneCylinderAxes) {
 // keep testing the change); with it the flange and the pipe, missed before, must be found at
 // their poses (MSSD within 10% of the diameter), and every instance must be a true one.
 TEST(Recognition, ARefusedPlaneNoLongerSupportsTheModel) {
-  const auto kept = kept_scene("clutter-scene21");
-  const KeptScene::Object *flange_ptr = kept.object("flange#3"), *pipe_ptr = kept.object("pipe_350#1");
-  ASSERT_NE(flange_ptr, nullptr);
-  ASSERT_NE(pipe_ptr, nullptr);
-  const auto &flange = *flange_ptr, &pipe = *pipe_ptr;
-  for (const bool drop : {false, true}) {
-    RecognitionParams params;
-    params.drop_refused_planes = drop;
-    const auto run = recognize_kept(kept, kBenchLibrary, params);
-    std::printf("dropping refused planes %s: the flange (%.0f%% occluded) %s, the pipe (%.0f%% occluded) %s, %zu instances\n", drop ? "on" : "off",
-                100 * (1 - flange.visible_fraction), run.found(flange) ? "found" : "missed", 100 * (1 - pipe.visible_fraction),
-                run.found(pipe) ? "found" : "missed", run.result.instances.size());
-    if (!drop) {
-      EXPECT_FALSE(run.found(flange)) << "found without dropping refused planes: the scene no longer tests it";
-      continue;
-    }
-    EXPECT_TRUE(run.found(flange)) << "the flange was not found at its pose";
-    EXPECT_TRUE(run.found(pipe)) << "the pipe was not found at its pose";
-    expect_every_instance_true(run, kept);
-  }
+  RecognitionParams without;
+  without.drop_refused_planes = false;
+  expect_found_only_with("clutter-scene21", "flange#3", {"flange#3", "pipe_350#1"}, "dropping refused planes", without, {});
 }
 
 // A part seen edge-on is not held against its pose where its surface meets the sensor's rays at
@@ -593,24 +589,10 @@ TEST(Recognition, ARefusedPlaneNoLongerSupportsTheModel) {
 // as the scene would no longer test the limit); with it the flange must be found at its pose
 // (MSSD within 10% of the diameter), and every instance must be a true one.
 TEST(Recognition, ASurfaceAtGrazingIncidenceIsNoEvidenceAgainstAPose) {
-  const auto kept = kept_scene("clutter-scene21");
-  const KeptScene::Object* flange_ptr = kept.object("flange#2");
-  ASSERT_NE(flange_ptr, nullptr);
-  const auto& flange = *flange_ptr;
-  ASSERT_GT(flange.visible_fraction, 0.99);
-  for (const bool limit : {false, true}) {
-    RecognitionParams params;
-    if (limit) params.max_incidence_deg = 70;
-    const auto run = recognize_kept(kept, kBenchLibrary, params);
-    std::printf("incidence limit %.0f deg: the edge-on flange %s, %zu instances\n", params.max_incidence_deg, run.found(flange) ? "found" : "missed",
-                run.result.instances.size());
-    if (!limit) {
-      EXPECT_FALSE(run.found(flange)) << "found without the incidence limit: the scene no longer tests it";
-      continue;
-    }
-    EXPECT_TRUE(run.found(flange)) << "the edge-on flange was not found at its pose";
-    expect_every_instance_true(run, kept);
-  }
+  ASSERT_GT(kept_scene("clutter-scene21").object("flange#2")->visible_fraction, 0.99);
+  RecognitionParams with;
+  with.max_incidence_deg = 70;
+  expect_found_only_with("clutter-scene21", "flange#2", {"flange#2"}, "an incidence limit of 70 deg", {}, with);
 }
 
 // A straight pipe's place along its axis is what the ICP holds least (only its rims fix it): a
@@ -624,23 +606,10 @@ TEST(Recognition, ASurfaceAtGrazingIncidenceIsNoEvidenceAgainstAPose) {
 // test the slides); with them it must be found at its pose (MSSD within 10% of the diameter),
 // and every instance must be a true one.
 TEST(Recognition, APipeRefusedShortOfItsEndIsSlidAlongItsAxis) {
-  const auto kept = kept_scene("clutter-scene44");
-  const KeptScene::Object* pipe_ptr = kept.object("pipe_350#1");
-  ASSERT_NE(pipe_ptr, nullptr);
-  const auto& pipe = *pipe_ptr;
-  ASSERT_GT(pipe.visible_fraction, 0.99);
-  for (const int steps : {0, RecognitionParams{}.axis_slide_steps}) {
-    RecognitionParams params;
-    params.axis_slide_steps = steps;
-    const auto run = recognize_kept(kept, kBenchLibrary, params);
-    std::printf("slides up to %d resolutions: the unoccluded pipe %s, %zu instances\n", steps, run.found(pipe) ? "found" : "missed", run.result.instances.size());
-    if (steps == 0) {
-      EXPECT_FALSE(run.found(pipe)) << "found without the slides: the scene no longer tests them";
-      continue;
-    }
-    EXPECT_TRUE(run.found(pipe)) << "the pipe was not found at its pose";
-    expect_every_instance_true(run, kept);
-  }
+  ASSERT_GT(kept_scene("clutter-scene44").object("pipe_350#1")->visible_fraction, 0.99);
+  RecognitionParams without;
+  without.axis_slide_steps = 0;
+  expect_found_only_with("clutter-scene44", "pipe_350#1", {"pipe_350#1"}, "slides along the axis", without, {});
 }
 }  // namespace
 }  // namespace artisan
