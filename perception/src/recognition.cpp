@@ -875,26 +875,28 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // What something hid is not held against the overlap either; but what is seen must be more
   // than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
   const auto required_overlap = [&](const FreeSpace::Check& seen) { return std::max(params.min_model_overlap * (1 - seen.occluded), params.min_overlap_floor); };
-  const auto passes = [&](const IcpResult& icp, const FreeSpace::Check& seen) {
-    return icp.overlap_fraction >= required_overlap(seen) && icp.rmse_m <= params.max_rmse_factor * res &&
-           seen.free_space <= params.max_free_space_fraction && seen.explained >= params.min_visible_explained &&
-           seen.planarity <= params.max_support_planarity && seen.continued <= params.max_continued_fraction;
+  // The tests a pose must pass, each loosened by a slack (none: `passes`).
+  struct Slack {
+    double overlap = 1;     ///< share of the required overlap
+    bool rmse = true;       ///< whether the residual is tested
+    double free_space = 1;  ///< times the free-space limit
+    double explained = 0;   ///< below the explained-surface limit
+    double planarity = 0;   ///< above the planarity limit
+    double continued = 1;   ///< times the continued-surface limit
   };
+  const auto meets = [&](const IcpResult& icp, const FreeSpace::Check& seen, const Slack& slack) {
+    return icp.overlap_fraction >= slack.overlap * required_overlap(seen) && (!slack.rmse || icp.rmse_m <= params.max_rmse_factor * res) &&
+           seen.free_space <= slack.free_space * params.max_free_space_fraction && seen.explained >= params.min_visible_explained - slack.explained &&
+           seen.planarity <= params.max_support_planarity + slack.planarity && seen.continued <= slack.continued * params.max_continued_fraction;
+  };
+  const auto passes = [&](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(icp, seen, {}); };
   // A coarse pose far from passing is refused without the fine ICP, which moves a pose by a
   // fraction of a resolution (on the clutter bench's first 12 scenes this screen let through all
   // 48 coarse poses that went on to pass, and stopped 482 of the 688 that failed).
-  const auto promising = [&](const IcpResult& icp, const FreeSpace::Check& seen) {
-    return icp.overlap_fraction >= 0.5 * required_overlap(seen) && seen.free_space <= 2 * params.max_free_space_fraction &&
-           seen.explained >= params.min_visible_explained - 0.15 && seen.planarity <= params.max_support_planarity + 0.03 &&
-           seen.continued <= 3 * params.max_continued_fraction;
-  };
+  const Slack promising{.overlap = 0.5, .rmse = false, .free_space = 2, .explained = 0.15, .planarity = 0.03, .continued = 3};
   // Refused by a small margin on the visibility tests alone (a pose a few millimetres off
   // along a pipe's axis: its end in free space, or short of the seen end).
-  const auto near_passing = [&](const IcpResult& icp, const FreeSpace::Check& seen) {
-    return icp.overlap_fraction >= required_overlap(seen) && icp.rmse_m <= params.max_rmse_factor * res &&
-           seen.free_space <= 2 * params.max_free_space_fraction && seen.explained >= params.min_visible_explained - 0.1 &&
-           seen.planarity <= params.max_support_planarity && seen.continued <= 3 * params.max_continued_fraction;
-  };
+  const Slack near_passing{.free_space = 2, .explained = 0.1, .continued = 3};
   struct Verified {
     Transform T;
     IcpResult icp;
@@ -1017,14 +1019,14 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
       // or turned on a box top) would be refused again: not refined.
       if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
-      if (!promising(v.icp, v.seen.emplace(free_space.check(model, v.T)))) continue;
+      if (!meets(v.icp, v.seen.emplace(free_space.check(model, v.T)), promising)) continue;
       ++refined;
       v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
       v.T = v.icp.T_target_source;
       v.seen.emplace(free_space.check(model, v.T));
       // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
       // what keeps the pose from passing.
-      if (const auto* cylinder = library.cylinder(s.m); cylinder && !passes(v.icp, *v.seen) && near_passing(v.icp, *v.seen))
+      if (const auto* cylinder = library.cylinder(s.m); cylinder && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, near_passing))
         if (auto slid = slid_along_axis(model, *cylinder, v.T, scene_points, scene_tree, free_space, fine, params.axis_slide_steps, res, passes)) {
           v.icp = slid->icp;
           v.T = slid->icp.T_target_source;
