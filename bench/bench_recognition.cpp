@@ -293,6 +293,8 @@ int main(int argc, char** argv) {
       else if (k == "pair_min_support") tuned.pair_min_support = v;
       else if (k == "pair_pool") tuned.pair_pool = int(v);
       else if (k == "axis_slide_steps") tuned.axis_slide_steps = int(v);
+      else if (k == "search_rounds") tuned.search_rounds = int(v);
+      else if (k == "free_space_own_bin") tuned.free_space_own_bin = v != 0;
       else if (k == "voting_pool") tuned.voting_pool = int(v);
       else if (k == "max_rmse_factor") tuned.max_rmse_factor = v;
       else if (k == "pair_step_fraction") library_params.pair_step_fraction = v;

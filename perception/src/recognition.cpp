@@ -43,8 +43,9 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 class FreeSpace {
  public:
   FreeSpace(const PointCloud& scene, const KdTree3& scene_tree, const std::vector<SensorView>& views, double resolution_m,
-            double tolerance_m, double max_incidence_rad, size_t largest_model_points)
-      : scene_(scene), tree_(scene_tree), resolution_(resolution_m), tolerance_(tolerance_m), min_incidence_cos_(std::cos(max_incidence_rad)) {
+            double tolerance_m, double max_incidence_rad, size_t largest_model_points, bool own_bin_only)
+      : scene_(scene), tree_(scene_tree), resolution_(resolution_m), tolerance_(tolerance_m), min_incidence_cos_(std::cos(max_incidence_rad)),
+        own_bin_only_(own_bin_only) {
     find_background_planes(largest_model_points);
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     for (const auto& p : scene.points) centroid += p.cast<double>();
@@ -93,7 +94,8 @@ class FreeSpace {
   ///    table, a wall; a model "found" flush with one, sunk into it, is explained by nothing of
   ///    its own);
   ///  - in free space when it lies in front of the nearest surface the sensor saw there (where
-  ///    the object cannot be);
+  ///    the object cannot be): the nearest in the 3 x 3 bins around its own, which must hold a
+  ///    return (with own_bin_only: a ray that returned nothing saw nothing through the model);
   ///  - occluded when something the sensor saw lies in front of it: no evidence either way, so it
   ///    counts neither for nor against.
   Check check(const PointCloud& model, const Transform& T) const {
@@ -126,7 +128,8 @@ class FreeSpace {
       }
       for (size_t i = 0; i < p.size(); ++i) {
         if (!keys[i] || n[i].dot(m.toward(p[i]).normalized()) <= min_incidence_cos_) continue;
-        const double seen = m.nearest_around(*keys[i]);
+        const double seen = own_bin_only_ && !m.nearest.count(Map::pack(keys[i]->u, keys[i]->v)) ? std::numeric_limits<double>::infinity()
+                                                                                                  : m.nearest_around(*keys[i]);
         if (!std::isfinite(seen)) continue;  // the sensor saw nothing there: no evidence either way
         counted[i] = 1;
         if (keys[i]->depth < seen - tolerance_) violates[i] = 1;
@@ -264,6 +267,7 @@ class FreeSpace {
   const KdTree3& tree_;
   double resolution_, tolerance_;
   double min_incidence_cos_;  ///< a model point seen at a larger incidence is no evidence either way
+  bool own_bin_only_;         ///< a model point whose own bin the sensor saw nothing in is no evidence either way
   std::vector<char> background_;  ///< per scene point: on a background plane
   std::vector<Map> maps_;
 };
@@ -829,7 +833,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   size_t largest_model = 0;
   for (size_t m = 0; m < library.model_count(); ++m) largest_model = std::max(largest_model, library.model_points(m).points.size());
   const FreeSpace free_space(scene_points, scene_tree, params.views, res, params.free_space_tolerance_factor * res,
-                             params.max_incidence_deg * std::numbers::pi / 180, largest_model);
+                             params.max_incidence_deg * std::numbers::pi / 180, largest_model, params.free_space_own_bin);
   // The coarse ICP ranks starting poses, the fine one places and measures the few verified; on
   // the clutter bench halving their samples (from 1500 and 4000) found the same instances
   // (55 against 54 in 16 scenes) in two thirds of the time.
@@ -990,54 +994,56 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     const PointCloud& model = library.model_points(s.m);
     s.verified.clear();
     s.winner.reset();
-    for (const auto& st : ranked_starts(s, true)) {
-      PoseHypothesis& h = *st.origin;
-      if (!h.coarse) h.coarse = icp_point_to_plane(model, scene_points, scene_tree, h.T_scene_model, coarse);
-      const IcpResult& r = *h.coarse;
-      s.verified.push_back({r.T_target_source, r, coarse_score(r, res),
-                            h.source == RecognitionCandidate::Source::grouping ? h.size : h.support, std::nullopt, &h});
-    }
-    std::sort(s.verified.begin(), s.verified.end(), [](const Verified& a, const Verified& b) { return a.score > b.score; });
-    // Poses the coarse ICP brought together (the model's surface within 2 resolutions of where a
-    // better one puts it) are refined once. All of them stay candidates for the ambiguity test.
     s.coarse_poses.clear();
-    for (const auto& v : s.verified) s.coarse_poses.push_back(v.icp);
-    {
-      std::vector<Verified> distinct;
-      for (auto& v : s.verified) {
-        const bool same = std::any_of(distinct.begin(), distinct.end(), [&](const Verified& d) { return (*s.same)(v.T, d.T, 2 * res); });
-        if (same) v.origin->done = true;
-        else distinct.push_back(std::move(v));
-      }
-      s.verified = std::move(distinct);
-    }
     const auto taken = [&](const Transform& T) { return on_accepted(model, T); };
-    size_t refined = 0;
-    for (size_t k = 0; k < s.verified.size() && refined < static_cast<size_t>(std::max(params.max_candidates_verified, 0)); ++k) {
-      auto& v = s.verified[k];
-      v.origin->done = true;
-      // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
-      // or turned on a box top) would be refused again: not refined.
-      if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
-      if (!meets(v.icp, v.seen.emplace(free_space.check(model, v.T)), promising)) continue;
-      ++refined;
-      v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
-      v.T = v.icp.T_target_source;
-      v.seen.emplace(free_space.check(model, v.T));
-      // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
-      // what keeps the pose from passing.
-      if (const auto* cylinder = library.cylinder(s.m); cylinder && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, near_passing))
-        if (auto slid = slid_along_axis(model, *cylinder, v.T, scene_points, scene_tree, free_space, fine, params.axis_slide_steps, res, passes)) {
-          v.icp = slid->icp;
-          v.T = slid->icp.T_target_source;
-          v.seen = slid->seen;
-        }
-      const auto& seen = *v.seen;
-      if (params.drop_refused_planes && (seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction))
-        refused_on_plane(s, v.T, seen.planarity);
-      if (!passes(v.icp, seen) || taken(v.T)) continue;
-      s.winner = k;
-      break;
+    for (int round = 0; round < std::max(params.search_rounds, 1) && !s.winner; ++round) {
+      std::vector<Verified> batch;
+      for (const auto& st : ranked_starts(s, round == 0)) {
+        PoseHypothesis& h = *st.origin;
+        if (!h.coarse) h.coarse = icp_point_to_plane(model, scene_points, scene_tree, h.T_scene_model, coarse);
+        const IcpResult& r = *h.coarse;
+        batch.push_back({r.T_target_source, r, coarse_score(r, res), h.source == RecognitionCandidate::Source::grouping ? h.size : h.support,
+                         std::nullopt, &h});
+      }
+      if (batch.empty()) break;
+      std::sort(batch.begin(), batch.end(), [](const Verified& a, const Verified& b) { return a.score > b.score; });
+      // Poses the coarse ICP brought together (the model's surface within 2 resolutions of where a
+      // better one, or one of an earlier round, puts it) are refined once. All of them stay
+      // candidates for the ambiguity test.
+      for (const auto& v : batch) s.coarse_poses.push_back(v.icp);
+      const size_t first = s.verified.size();
+      for (auto& v : batch) {
+        const bool same = std::any_of(s.verified.begin(), s.verified.end(), [&](const Verified& d) { return (*s.same)(v.T, d.T, 2 * res); });
+        if (same) v.origin->done = true;
+        else s.verified.push_back(std::move(v));
+      }
+      size_t refined = 0;
+      for (size_t k = first; k < s.verified.size() && refined < static_cast<size_t>(std::max(params.max_candidates_verified, 0)); ++k) {
+        auto& v = s.verified[k];
+        v.origin->done = true;
+        // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
+        // or turned on a box top) would be refused again: not refined.
+        if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
+        if (!meets(v.icp, v.seen.emplace(free_space.check(model, v.T)), promising)) continue;
+        ++refined;
+        v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
+        v.T = v.icp.T_target_source;
+        v.seen.emplace(free_space.check(model, v.T));
+        // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
+        // what keeps the pose from passing.
+        if (const auto* cylinder = library.cylinder(s.m); cylinder && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, near_passing))
+          if (auto slid = slid_along_axis(model, *cylinder, v.T, scene_points, scene_tree, free_space, fine, params.axis_slide_steps, res, passes)) {
+            v.icp = slid->icp;
+            v.T = slid->icp.T_target_source;
+            v.seen = slid->seen;
+          }
+        const auto& seen = *v.seen;
+        if (params.drop_refused_planes && (seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction))
+          refused_on_plane(s, v.T, seen.planarity);
+        if (!passes(v.icp, seen) || taken(v.T)) continue;
+        s.winner = k;
+        break;
+      }
     }
     if (!s.winner) return;
     // A part whose distinguishing piece is small (a valve's stem and hand wheel, a tee's branch)

@@ -223,6 +223,15 @@ struct RecognitionParams {
   /// giving up (a coarse pose far from passing the visibility tests is refused without it, and
   /// does not count)
   int max_candidates_verified = 5;
+  /// [1] rounds of an instance search: when one ends without an instance, the next ranks the
+  /// starting poses not tried yet (after the surface its refused poses lay flush on was dropped)
+  /// and refines the best of them as the first did
+  int search_rounds = 1;
+  /// a model point whose own bin of a view holds no return is no evidence of free space (where
+  /// the scanner dropped the returns of a face at grazing incidence it saw nothing through it
+  /// either), whatever the bins around it saw (false: the nearest depth of the 3 x 3 bins around
+  /// it, the table seen beside an edge-on flange)
+  bool free_space_own_bin = true;
   bool keep_candidates = false;        ///< fill RecognitionResult::candidates (diagnosis)
 };
 
