@@ -602,17 +602,17 @@ TEST(Recognition, ASurfaceAtGrazingIncidenceIsNoEvidenceAgainstAPose) {
 // dropped), the sensor saw nothing through it either: a model point there is no evidence of free
 // space, whatever the neighbouring bins saw (behind an edge-on flange, the table). The free-space
 // test had taken the nearest depth seen in the 3 x 3 bins around each model point's; it now
-// counts a point only when its own bin holds a return (RecognitionParams::free_space_own_bin).
+// can count a point only when its own bin holds a return (RecognitionParams::free_space_own_bin).
 // Method: bench_recognition's scene 21, whose flange#2 is unoccluded but seen edge-on, as above,
-// recognized with the five-part library as the bench does, with the 3 x 3 bins alone and with
-// the default. With the 3 x 3 bins the flange must be missed (its true pose leaves a tenth of its
+// recognized with the five-part library as the bench does, with the 3 x 3 bins alone (the
+// default) and with the own-bin test. With the 3 x 3 bins the flange must be missed (its true pose leaves a tenth of its
 // sensor-facing surface "in free space"; the test fails if it is found, as the scene would no
-// longer test the change); with the default it must be found at its pose (MSSD within 10% of the
+// longer test the change); with the own-bin test it must be found at its pose (MSSD within 10% of the
 // diameter), and every instance must be a true one.
 TEST(Recognition, WhereTheSensorReturnedNothingItSawNoFreeSpace) {
-  RecognitionParams without;
-  without.free_space_own_bin = false;
-  expect_found_only_with("clutter-scene21", "flange#2", {"flange#2"}, "the own-bin free-space test", without, {});
+  RecognitionParams with;
+  with.free_space_own_bin = true;
+  expect_found_only_with("clutter-scene21", "flange#2", {"flange#2"}, "the own-bin free-space test", {}, with);
 }
 
 // A straight pipe's place along its axis is what the ICP holds least (only its rims fix it): a
