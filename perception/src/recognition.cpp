@@ -98,6 +98,9 @@ class FreeSpace {
   ///    return (with own_bin_only: a ray that returned nothing saw nothing through the model);
   ///  - occluded when something the sensor saw lies in front of it: no evidence either way, so it
   ///    counts neither for nor against.
+  /// With own_bin_only, a point met beyond 60 degrees of incidence whose own bin holds no return
+  /// (a face at grazing incidence whose returns the scanner dropped) is no evidence either way
+  /// unless something the sensor saw hides it (it counts as occluded).
   Check check(const PointCloud& model, const Transform& T) const {
     Check c;
     if (maps_.empty()) return c;
@@ -127,18 +130,26 @@ class FreeSpace {
         if (!inserted) it->second = std::min(it->second, keys[i]->depth);
       }
       for (size_t i = 0; i < p.size(); ++i) {
-        if (!keys[i] || n[i].dot(m.toward(p[i]).normalized()) <= min_incidence_cos_) continue;
-        const double seen = own_bin_only_ && !m.nearest.count(Map::pack(keys[i]->u, keys[i]->v)) ? std::numeric_limits<double>::infinity()
-                                                                                                  : m.nearest_around(*keys[i]);
+        if (!keys[i]) continue;
+        const double incidence_cos = n[i].dot(m.toward(p[i]).normalized());
+        if (incidence_cos <= min_incidence_cos_) continue;
+        const double seen = m.nearest_around(*keys[i]);
         if (!std::isfinite(seen)) continue;  // the sensor saw nothing there: no evidence either way
-        counted[i] = 1;
-        if (keys[i]->depth < seen - tolerance_) violates[i] = 1;
+        const bool returned = !own_bin_only_ || incidence_cos > kGrazingCos || m.nearest.count(Map::pack(keys[i]->u, keys[i]->v));
+        if (returned) {
+          counted[i] = 1;
+          if (keys[i]->depth < seen - tolerance_) violates[i] = 1;
+        }
         // Parallel rays are only an approximation of a linear scanner's (the Stanford Cyberware
         // scans' real ray directions are not recorded): what it should have seen is not predicted.
+        // Where its ray returned nothing (own_bin_only) a point is expected only when the scene
+        // hides it.
         if (m.view.rays == SensorView::Rays::kPerspective && keys[i]->depth <= self.at(Map::pack(keys[i]->u, keys[i]->v)) + tolerance_) {
+          const bool there = near_scene(i), behind = !there && m.seen_at(*keys[i]) < keys[i]->depth - tolerance_;
+          if (!returned && !behind) continue;
           expected[i] = 1;
-          if (near_scene(i)) seen_there[i] = 1;
-          else if (m.seen_at(*keys[i]) < keys[i]->depth - tolerance_) hidden[i] = 1;
+          if (there) seen_there[i] = 1;
+          else if (behind) hidden[i] = 1;
         }
       }
     }
@@ -267,7 +278,10 @@ class FreeSpace {
   const KdTree3& tree_;
   double resolution_, tolerance_;
   double min_incidence_cos_;  ///< a model point seen at a larger incidence is no evidence either way
-  bool own_bin_only_;         ///< a model point whose own bin the sensor saw nothing in is no evidence either way
+  bool own_bin_only_;         ///< a model point whose own bin the sensor saw nothing in is no evidence of free space
+  /// Incidence from which own_bin_only holds (60 degrees: where the Vivid starts dropping
+  /// returns); a surface facing the sensor more squarely that returned nothing lay in a shadow.
+  static constexpr double kGrazingCos = 0.5;
   std::vector<char> background_;  ///< per scene point: on a background plane
   std::vector<Map> maps_;
 };
