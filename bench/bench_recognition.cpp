@@ -542,7 +542,9 @@ int main(int argc, char** argv) {
                     {"seconds", t_ours},
                     {"seconds_spin_images", result.seconds_spin_images},
                     {"seconds_search", result.seconds_search},
-                    {"seconds_verify", result.seconds_verify}};
+                    {"seconds_verify", result.seconds_verify},
+                    {"seconds_hypotheses", result.seconds_hypotheses},
+                    {"seconds_voting", result.seconds_voting}};
     if (with_ppf) {
       // The scene at the detector's own sampling distance (the relative sampling step times the models' mean diameter),
       // as its authors do; every point pair within a model's diameter is voted on.

@@ -125,11 +125,15 @@ std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std
         const auto c = cell(s[r], sn[r], s[i], sn[i]);
         if (c < 0) continue;
         const float alpha_s = alpha_of(T_local_scene, s[i]);
-        for (uint32_t e = offsets_[static_cast<size_t>(c)]; e < offsets_[static_cast<size_t>(c) + 1]; ++e) {
-          float alpha = alpha_s - entries_[e].alpha;
+        // The cell's entries as plain pointers: through the vectors the compiler reloads the
+        // bound after every increment (the counts might alias the offsets).
+        uint32_t* const votes = accumulator.data();
+        const auto* const end = entries_.data() + offsets_[static_cast<size_t>(c) + 1];
+        for (const auto* e = entries_.data() + offsets_[static_cast<size_t>(c)]; e != end; ++e) {
+          float alpha = alpha_s - e->alpha;
           if (alpha < 0) alpha += kTwoPi;
           const auto bin = std::min(alpha_bins - 1, static_cast<size_t>(alpha * alpha_scale));
-          ++accumulator[entries_[e].reference * alpha_bins + bin];
+          ++votes[e->reference * alpha_bins + bin];
         }
       }
       // The largest cells, at most peaks_per_reference of them.

@@ -1120,7 +1120,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     s.surface_support = std::make_unique<SurfaceSupport>(model, params.pair_score_points, scene_points, scene_tree);
     s.same = std::make_unique<SameSurface>(model);
     auto made = pair_hypotheses(model, scene_points, *s.surface_support, s.candidates, res, params);
+    const auto t_voting = Clock::now();
     auto voted = voting_hypotheses(library.pair_features(m), scene_points, free_space.background(), *s.surface_support, res, params);
+    result.seconds_voting += since(t_voting);
     made.insert(made.end(), std::make_move_iterator(voted.begin()), std::make_move_iterator(voted.end()));
     if (const auto* cylinder = library.cylinder(m); cylinder && params.axis_hypotheses) {
       auto on_axes = axis_hypotheses(*cylinder, scene_axes(cylinder->radius), *s.surface_support, res, params);
@@ -1128,6 +1130,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     }
     for (auto& h : best_distinct(std::move(made), *s.same, static_cast<size_t>(std::max(params.pair_pool, 0)))) s.hypotheses.push_back(std::move(h));
   }
+  result.seconds_hypotheses = since(t0);
   while (true) {
     for (auto& s : searches)
       if (s.stale && s.instances < params.max_instances) {

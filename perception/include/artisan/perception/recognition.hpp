@@ -285,6 +285,11 @@ struct RecognitionResult {
   std::vector<Match> matches;  ///< the correspondences kept, with RecognitionParams::keep_candidates
   size_t scene_points = 0;
   double seconds_spin_images = 0.0, seconds_search = 0.0, seconds_verify = 0.0;
+  /// Of seconds_verify: the scene's visibility maps and background planes, and every model's pose
+  /// hypotheses (pairs of matches, point-pair voting, cylinder axes) with their ranking support;
+  /// the rest is the searches (ICP, visibility tests, turns, ambiguity)
+  double seconds_hypotheses = 0.0;
+  double seconds_voting = 0.0;  ///< of seconds_hypotheses: the point-pair voting
 };
 
 /// Finds every instance of the library's models in `scene`. A scene with none gives none.
