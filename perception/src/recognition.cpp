@@ -94,8 +94,7 @@ class FreeSpace {
   ///    table, a wall; a model "found" flush with one, sunk into it, is explained by nothing of
   ///    its own);
   ///  - in free space when it lies in front of the nearest surface the sensor saw there (where
-  ///    the object cannot be): the nearest in the 3 x 3 bins around its own, which must hold a
-  ///    return (with own_bin_only: a ray that returned nothing saw nothing through the model);
+  ///    the object cannot be): the nearest in the 3 x 3 bins around its own;
   ///  - occluded when something the sensor saw lies in front of it: no evidence either way, so it
   ///    counts neither for nor against.
   /// With own_bin_only, a point met beyond 60 degrees of incidence whose own bin holds no return
@@ -135,7 +134,8 @@ class FreeSpace {
         if (incidence_cos <= min_incidence_cos_) continue;
         const double seen = m.nearest_around(*keys[i]);
         if (!std::isfinite(seen)) continue;  // the sensor saw nothing there: no evidence either way
-        const bool returned = !own_bin_only_ || incidence_cos > kGrazingCos || m.nearest.count(Map::pack(keys[i]->u, keys[i]->v));
+        const int64_t bin = Map::pack(keys[i]->u, keys[i]->v);
+        const bool returned = !own_bin_only_ || incidence_cos > kGrazingCos || m.nearest.count(bin);
         if (returned) {
           counted[i] = 1;
           if (keys[i]->depth < seen - tolerance_) violates[i] = 1;
@@ -144,7 +144,7 @@ class FreeSpace {
         // scans' real ray directions are not recorded): what it should have seen is not predicted.
         // Where its ray returned nothing (own_bin_only) a point is expected only when the scene
         // hides it.
-        if (m.view.rays == SensorView::Rays::kPerspective && keys[i]->depth <= self.at(Map::pack(keys[i]->u, keys[i]->v)) + tolerance_) {
+        if (m.view.rays == SensorView::Rays::kPerspective && keys[i]->depth <= self.at(bin) + tolerance_) {
           const bool there = near_scene(i), behind = !there && m.seen_at(*keys[i]) < keys[i]->depth - tolerance_;
           if (!returned && !behind) continue;
           expected[i] = 1;
