@@ -295,9 +295,11 @@ int main(int argc, char** argv) {
       else if (k == "axis_slide_steps") tuned.axis_slide_steps = int(v);
       else if (k == "search_rounds") tuned.search_rounds = int(v);
       else if (k == "free_space_own_bin") tuned.free_space_own_bin = v != 0;
+      else if (k == "own_bin_min_incidence_deg") tuned.own_bin_min_incidence_deg = v;
       else if (k == "voting_pool") tuned.voting_pool = int(v);
       else if (k == "max_rmse_factor") tuned.max_rmse_factor = v;
       else if (k == "pair_step_fraction") library_params.pair_step_fraction = v;
+      else if (k == "pair_max_cell_share") library_params.pair_max_cell_share = v;
       else if (k == "coarse_refined") tuned.coarse_refined = int(v);
       else if (k == "max_instances") tuned.max_instances = int(v);
       else if (k == "max_continued_fraction") tuned.max_continued_fraction = v;

@@ -14,8 +14,6 @@ namespace artisan::detail {
 
 namespace {
 
-constexpr float kTwoPi = 2 * std::numbers::pi_v<float>;
-
 // The transform that moves p to the origin and turns n onto +x (section 3.3: T_m->g, T_s->g).
 Transform to_local(const Eigen::Vector3f& p, const Eigen::Vector3f& n) {
   const Eigen::Quaterniond q = Eigen::Quaterniond::FromTwoVectors(n.cast<double>(), Eigen::Vector3d::UnitX());
@@ -25,10 +23,22 @@ Transform to_local(const Eigen::Vector3f& p, const Eigen::Vector3f& n) {
   return T;
 }
 
-// The angle of a partner about +x in the local frame of its reference point.
-float alpha_of(const Transform& T_local, const Eigen::Vector3f& partner) {
-  const Eigen::Vector3d q = T_local * partner.cast<double>();
-  return static_cast<float>(std::atan2(q.z(), q.y()));
+// What the rotation about +x of a reference point's local frame needs of it: the point, and the
+// rows of the rotation that give a partner's local y and z.
+struct AlphaFrame {
+  Eigen::Vector3f origin, y, z;
+};
+AlphaFrame alpha_frame(const Transform& T_local, const Eigen::Vector3f& p) {
+  const Eigen::Matrix3f R = T_local.linear().cast<float>();
+  return {p, R.row(1).transpose(), R.row(2).transpose()};
+}
+
+// The angle of a partner about +x in the local frame of its reference point, in 65536ths of a
+// turn: the difference of two of them modulo 2^16 is the rotation between them.
+uint32_t alpha_of(const AlphaFrame& f, const Eigen::Vector3f& partner) {
+  const Eigen::Vector3f d = partner - f.origin;
+  const double turns = std::atan2(static_cast<double>(f.z.dot(d)), static_cast<double>(f.y.dot(d))) / (2 * std::numbers::pi);  // [-0.5, 0.5]
+  return static_cast<uint32_t>(static_cast<int64_t>(std::floor(turns * 65536)) & 0xffff);
 }
 
 }  // namespace
@@ -40,29 +50,42 @@ int64_t PairFeatureModel::cell(const Eigen::Vector3f& p1, const Eigen::Vector3f&
   const auto distance_bin = static_cast<int64_t>(length / static_cast<float>(params_.step_m));
   if (distance_bin >= distance_bins_) return -1;
   const Eigen::Vector3f u = d / length;
-  const int a = params_.angle_bins;
-  const auto angle_bin = [a](float cosine) {
-    const float angle = std::acos(std::clamp(cosine, -1.0f, 1.0f));
-    return std::min<int64_t>(a - 1, static_cast<int64_t>(angle / std::numbers::pi_v<float> * static_cast<float>(a)));
+  const int64_t a = params_.angle_bins;
+  // The bin of the angle whose cosine this is: the table's guess for the cosine's slot, then the
+  // bin boundaries' cosines either side.
+  const auto angle_bin = [this, a](float cosine) {
+    constexpr float half = kCosineSlots / 2;
+    int64_t bin = angle_bin_of_cosine_[static_cast<size_t>(std::clamp((cosine + 1) * half, 0.0f, kCosineSlots - 1.0f))];
+    while (bin + 1 < a && cosine <= bin_start_cosine_[static_cast<size_t>(bin + 1)]) ++bin;
+    while (bin > 0 && cosine > bin_start_cosine_[static_cast<size_t>(bin)]) --bin;
+    return bin;
   };
   return ((distance_bin * a + angle_bin(n1.dot(u))) * a + angle_bin(n2.dot(u))) * a + angle_bin(n1.dot(n2));
 }
 
 PairFeatureModel::PairFeatureModel(const PointCloud& model_points, const PairVotingParams& params) : params_(params) {
-  if (!(params.step_m > 0) || params.angle_bins < 2 || params.alpha_bins < 4 || params.reference_stride < 1 || params.peaks_per_reference < 1 ||
+  if (!(params.step_m > 0) || params.angle_bins < 2 || params.angle_bins > 255 || params.alpha_bins < 4 || params.alpha_bins > 4096 || params.reference_stride < 1 || params.peaks_per_reference < 1 ||
       !(params.max_cell_share > 0 && params.max_cell_share <= 1))
     throw Error("point-pair voting: step " + std::to_string(params.step_m) + " m must be positive, angle bins " +
-                std::to_string(params.angle_bins) + " at least 2, alpha bins " + std::to_string(params.alpha_bins) + " at least 4, reference stride " +
+                std::to_string(params.angle_bins) + " from 2 to 255, alpha bins " + std::to_string(params.alpha_bins) + " from 4 to 4096, reference stride " +
                 std::to_string(params.reference_stride) + " and peaks " + std::to_string(params.peaks_per_reference) +
                 " at least 1, and max_cell_share " + std::to_string(params.max_cell_share) + " in (0, 1]");
   if (model_points.normals.size() != model_points.points.size()) throw Error("point-pair voting: the model points have no normals");
+  // An angle's bin from its cosine without the arc cosine: the cosines where bins start, and a
+  // first guess by slots of 1/2048 of the cosine's range.
+  for (int k = 0; k < params.angle_bins; ++k) bin_start_cosine_.push_back(std::cos(static_cast<float>(k) * std::numbers::pi_v<float> / static_cast<float>(params.angle_bins)));
+  for (size_t i = 0; i < angle_bin_of_cosine_.size(); ++i) {
+    const double angle = std::acos((static_cast<double>(i) + 0.5) / (kCosineSlots / 2) - 1);
+    angle_bin_of_cosine_[i] = static_cast<uint8_t>(std::min(params.angle_bins - 1, static_cast<int>(angle / std::numbers::pi * params.angle_bins)));
+  }
   points_ = resample_oriented_points(model_points, params.step_m);
   const auto box = points_.bounds();
   diameter_ = static_cast<double>(box.diagonal().norm());
   distance_bins_ = static_cast<int>(diameter_ / params.step_m) + 1;
   const auto& p = points_.points;
   const auto& n = points_.normals;
-  for (size_t i = 0; i < p.size(); ++i) T_local_model_.push_back(to_local(p[i], n[i]));
+  std::vector<AlphaFrame> frames;
+  for (size_t i = 0; i < p.size(); ++i) T_local_model_.push_back(to_local(p[i], n[i])), frames.push_back(alpha_frame(T_local_model_[i], p[i]));
   const auto a = static_cast<size_t>(params.angle_bins);
   // Counting sort of every ordered pair by its cell: count, prefix sums, fill. Cells holding more
   // than max_cell_share of the pairs are left empty.
@@ -79,12 +102,15 @@ PairFeatureModel::PairFeatureModel(const PointCloud& model_points, const PairVot
     if (static_cast<double>(count[c]) > cap) dropped_ += count[c], count[c] = 0;
     offsets_[c + 1] = offsets_[c] + count[c];
   }
+  if (p.size() > (size_t{1} << 16))
+    throw Error("point-pair voting: " + std::to_string(p.size()) + " model points at step " + std::to_string(params.step_m) +
+                " m exceed the table's 65536; use a coarser step");
   entries_.resize(offsets_.back());
   std::vector<uint32_t> fill(offsets_.begin(), offsets_.end() - 1);
   for (size_t i = 0; i < p.size(); ++i)
     for (size_t j = 0; j < p.size(); ++j)
       if (const auto c = cells[i * p.size() + j]; c >= 0 && count[static_cast<size_t>(c)] > 0)
-        entries_[fill[static_cast<size_t>(c)]++] = {static_cast<uint32_t>(i), alpha_of(T_local_model_[i], p[j])};
+        entries_[fill[static_cast<size_t>(c)]++] = static_cast<uint32_t>(i) << 16 | alpha_of(frames[i], p[j]);
 }
 
 std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std::vector<char>& ignore) const {
@@ -103,7 +129,6 @@ std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std
   const auto& sn = samples.normals;
   const size_t model_points = points_.points.size();
   const auto alpha_bins = static_cast<size_t>(params_.alpha_bins);
-  const float alpha_scale = static_cast<float>(params_.alpha_bins) / kTwoPi;
   const float radius = static_cast<float>(diameter_);
 
   // Per reference point: its accumulator's peaks, as poses with their votes (eq. 3-4).
@@ -118,23 +143,23 @@ std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std
     for (size_t k = 0; k < references.size(); ++k) {
       const size_t r = references[k];
       const Transform T_local_scene = to_local(s[r], sn[r]);
+      const AlphaFrame frame = alpha_frame(T_local_scene, s[r]);
       std::fill(accumulator.begin(), accumulator.end(), 0u);
       tree.within(s[r], radius, near);
       for (const size_t i : near) {
         if (i == r) continue;
         const auto c = cell(s[r], sn[r], s[i], sn[i]);
         if (c < 0) continue;
-        const float alpha_s = alpha_of(T_local_scene, s[i]);
-        // The cell's entries as plain pointers: through the vectors the compiler reloads the
-        // bound after every increment (the counts might alias the offsets).
+        const uint32_t alpha_s = alpha_of(frame, s[i]);
+        // The innermost loop, a billion times per model and scene: plain pointers (through the
+        // vectors the compiler reloads the bound after every increment, as the counts might
+        // alias the offsets), and each entry one word, its model point over its alpha_m; the
+        // rotation alpha_s - alpha_m modulo a turn, times the bins, over 2^16 is its bin.
         uint32_t* const votes = accumulator.data();
-        const auto* const end = entries_.data() + offsets_[static_cast<size_t>(c) + 1];
-        for (const auto* e = entries_.data() + offsets_[static_cast<size_t>(c)]; e != end; ++e) {
-          float alpha = alpha_s - e->alpha;
-          if (alpha < 0) alpha += kTwoPi;
-          const auto bin = std::min(alpha_bins - 1, static_cast<size_t>(alpha * alpha_scale));
-          ++votes[e->reference * alpha_bins + bin];
-        }
+        const uint32_t bins = params_.alpha_bins;
+        const uint32_t* const end = entries_.data() + offsets_[static_cast<size_t>(c) + 1];
+        for (const uint32_t* e = entries_.data() + offsets_[static_cast<size_t>(c)]; e != end; ++e)
+          ++votes[(*e >> 16) * bins + ((((alpha_s - *e) & 0xffffu) * bins) >> 16)];
       }
       // The largest cells, at most peaks_per_reference of them.
       auto& mine = peaks[k];

@@ -11,6 +11,7 @@
 // for each model pair with the same feature, for (model reference point, alpha = alpha_s - alpha_m)
 // (eq. 3-4); the accumulator's peaks are poses. Poses of all reference points are clustered
 // (section 3.4) and returned by total votes.
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -21,8 +22,8 @@ namespace artisan::detail {
 
 struct PairVotingParams {
   double step_m = 0.006;            ///< [m] sampling and distance quantisation step
-  int angle_bins = 15;              ///< [1] bins over [0, pi] of each feature angle (12 degrees)
-  int alpha_bins = 30;              ///< [1] bins over [0, 2 pi) of the rotation about the normal
+  int angle_bins = 15;              ///< [1] bins over [0, pi] of each feature angle (12 degrees; 2 to 255)
+  int alpha_bins = 30;              ///< [1] bins over [0, 2 pi) of the rotation about the normal (4 to 4096)
   /// [1] cells of the table holding more than this share of the model's pairs are not voted
   /// for: features that many pairs share say little (coplanar pairs on a flange's face, pairs
   /// along a pipe), and cost most (every scene pair on a box's face would vote for all of them)
@@ -54,10 +55,6 @@ class PairFeatureModel {
   double diameter() const { return diameter_; }
 
  private:
-  struct Entry {
-    uint32_t reference;  ///< model point index
-    float alpha;         ///< [rad] alpha_m
-  };
   /// The quantised feature's cell in the table, or -1 when it lies beyond the model's diameter.
   int64_t cell(const Eigen::Vector3f& p1, const Eigen::Vector3f& n1, const Eigen::Vector3f& p2, const Eigen::Vector3f& n2) const;
 
@@ -67,7 +64,11 @@ class PairFeatureModel {
   double diameter_ = 0;
   int distance_bins_ = 0;
   std::vector<uint32_t> offsets_;  ///< per cell, into entries_ (cells + 1)
-  std::vector<Entry> entries_;
+  /// Per model pair, by cell: its reference point's index << 16 | alpha_m in 65536ths of a turn
+  std::vector<uint32_t> entries_;
+  static constexpr size_t kCosineSlots = 4096;
+  std::array<uint8_t, kCosineSlots> angle_bin_of_cosine_{};  ///< a feature angle's bin, near enough, by its cosine's slot of [-1, 1]
+  std::vector<float> bin_start_cosine_;                      ///< per feature-angle bin: the cosine of its smallest angle
   size_t dropped_ = 0;  ///< pairs in cells over max_cell_share
 };
 

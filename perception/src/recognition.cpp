@@ -43,9 +43,9 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 class FreeSpace {
  public:
   FreeSpace(const PointCloud& scene, const KdTree3& scene_tree, const std::vector<SensorView>& views, double resolution_m,
-            double tolerance_m, double max_incidence_rad, size_t largest_model_points, bool own_bin_only)
+            double tolerance_m, double max_incidence_rad, size_t largest_model_points, bool own_bin_only, double own_bin_min_incidence_rad)
       : scene_(scene), tree_(scene_tree), resolution_(resolution_m), tolerance_(tolerance_m), min_incidence_cos_(std::cos(max_incidence_rad)),
-        own_bin_only_(own_bin_only) {
+        own_bin_only_(own_bin_only), grazing_cos_(std::cos(own_bin_min_incidence_rad)) {
     find_background_planes(largest_model_points);
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     for (const auto& p : scene.points) centroid += p.cast<double>();
@@ -135,7 +135,7 @@ class FreeSpace {
         const double seen = m.nearest_around(*keys[i]);
         if (!std::isfinite(seen)) continue;  // the sensor saw nothing there: no evidence either way
         const int64_t bin = Map::pack(keys[i]->u, keys[i]->v);
-        const bool returned = !own_bin_only_ || incidence_cos > kGrazingCos || m.nearest.count(bin);
+        const bool returned = !own_bin_only_ || incidence_cos > grazing_cos_ || m.nearest.count(bin);
         if (returned) {
           counted[i] = 1;
           if (keys[i]->depth < seen - tolerance_) violates[i] = 1;
@@ -279,9 +279,9 @@ class FreeSpace {
   double resolution_, tolerance_;
   double min_incidence_cos_;  ///< a model point seen at a larger incidence is no evidence either way
   bool own_bin_only_;         ///< a model point whose own bin the sensor saw nothing in is no evidence of free space
-  /// Incidence from which own_bin_only holds (60 degrees: where the Vivid starts dropping
-  /// returns); a surface facing the sensor more squarely that returned nothing lay in a shadow.
-  static constexpr double kGrazingCos = 0.5;
+  /// The cosine of the incidence from which own_bin_only holds; a surface facing the sensor
+  /// more squarely that returned nothing lay in a shadow.
+  double grazing_cos_;
   std::vector<char> background_;  ///< per scene point: on a background plane
   std::vector<Map> maps_;
 };
@@ -721,6 +721,7 @@ void SpinImageLibrary::compress() {
     }
     if (m.pairs) continue;
     detail::PairVotingParams voting;
+    voting.max_cell_share = params_.pair_max_cell_share;
     voting.step_m = std::max(params_.pair_min_step_factor * params_.resolution_m,
                              params_.pair_step_fraction * static_cast<double>(m.points.bounds().diagonal().norm()));
     m.pairs = std::make_shared<const detail::PairFeatureModel>(m.points, voting);
@@ -790,6 +791,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   if (!(params.axis_step_factor > 0)) throw Error("recognition: axis_step_factor " + std::to_string(params.axis_step_factor) + " must be positive");
   if (!(params.max_incidence_deg > 0 && params.max_incidence_deg <= 90))
     throw Error("recognition: max_incidence_deg " + std::to_string(params.max_incidence_deg) + " must lie in (0, 90]");
+  if (!(params.own_bin_min_incidence_deg > 0 && params.own_bin_min_incidence_deg <= 90))
+    throw Error("recognition: own_bin_min_incidence_deg " + std::to_string(params.own_bin_min_incidence_deg) + " must lie in (0, 90]");
   library.compress();
   RecognitionResult result;
   const double res = library.params().resolution_m;
@@ -847,7 +850,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   size_t largest_model = 0;
   for (size_t m = 0; m < library.model_count(); ++m) largest_model = std::max(largest_model, library.model_points(m).points.size());
   const FreeSpace free_space(scene_points, scene_tree, params.views, res, params.free_space_tolerance_factor * res,
-                             params.max_incidence_deg * std::numbers::pi / 180, largest_model, params.free_space_own_bin);
+                             params.max_incidence_deg * std::numbers::pi / 180, largest_model, params.free_space_own_bin,
+                             params.own_bin_min_incidence_deg * std::numbers::pi / 180);
   // The coarse ICP ranks starting poses, the fine one places and measures the few verified; on
   // the clutter bench halving their samples (from 1500 and 4000) found the same instances
   // (55 against 54 in 16 scenes) in two thirds of the time.

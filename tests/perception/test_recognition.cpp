@@ -296,6 +296,9 @@ TEST(Recognition, BadInputThrows) {
     RecognitionParams bad_incidence;
     bad_incidence.max_incidence_deg = incidence;
     EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad_incidence), Error) << incidence;
+    RecognitionParams bad_grazing;
+    bad_grazing.own_bin_min_incidence_deg = incidence;
+    EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad_grazing), Error) << incidence;
   }
   SpinImageLibrary lib;
   lib.add_model("bunny", scan_mesh("bun000"));
@@ -555,11 +558,16 @@ TEST(Recognition, AmbiguousOnlyWhenAnotherSurfaceFitsAsWell) {
 // (data/recognition/clutter-scene27: a pipe 28% occluded, a tee and two elbows with distractors,
 // one simulated Vivid view), recognized with the five-part library as the bench does. Without
 // the axis proposals the pipe is not found (no pose near it); with them it must be, at its pose
-// (MSSD within 10% of its diameter), and every instance must be a true one.
+// (MSSD within 10% of its diameter), and every instance must be a true one. Point-pair voting
+// is off in both runs: since its table changed (2026-12-04: one word per pair, rotations in
+// 65536ths of a turn) one of its vote clusters also lands near this pipe, and the scene would
+// no longer tell the axis proposals' part.
 TEST(Recognition, APipeIsProposedOnTheSceneCylinderAxes) {
-  RecognitionParams without;
+  RecognitionParams with;
+  with.voting_pool = 0;
+  RecognitionParams without = with;
   without.axis_hypotheses = false;
-  expect_found_only_with("clutter-scene27", "pipe_350#1", {"pipe_350#1"}, "axis proposals", without, {});
+  expect_found_only_with("clutter-scene27", "pipe_350#1", {"pipe_350#1"}, "axis proposals", without, with);
 }
 
 // A flange's face fits any flat surface at every slide and turn; in a crowded scene such fits

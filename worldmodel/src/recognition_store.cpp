@@ -145,6 +145,7 @@ std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id,
                            {"sensor_views", params.views.size()},
                            {"max_free_space_fraction", params.max_free_space_fraction},
                            {"free_space_own_bin", params.free_space_own_bin},
+                           {"own_bin_min_incidence_deg", params.own_bin_min_incidence_deg},
                            {"search_rounds", params.search_rounds},
                            {"max_incidence_deg", params.max_incidence_deg},
                            {"min_visible_explained", params.min_visible_explained}};

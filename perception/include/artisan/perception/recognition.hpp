@@ -31,6 +31,9 @@ struct ModelLibraryParams {
   /// pair_min_step_factor resolutions.
   double pair_step_fraction = 0.03;
   double pair_min_step_factor = 2.0;  ///< [resolutions]
+  /// [1] a table cell holding more than this share of the model's pairs is not voted for
+  /// (detail::PairVotingParams::max_cell_share)
+  double pair_max_cell_share = 0.005;
   /// A model with at least this share of its points on cylinders about one of its turn axes (a
   /// straight pipe: its outside and bore) is also proposed on the scene's cylinder axes of its
   /// radius (RecognitionParams::axis_hypotheses).
@@ -229,7 +232,7 @@ struct RecognitionParams {
   /// test below) a second round found a flange in scene 3 and a tee in 33 that ranked behind
   /// others; a third found nothing more
   int search_rounds = 2;
-  /// a model point met by the rays beyond 60 degrees of incidence whose own bin of a view holds
+  /// a model point met by the rays beyond own_bin_min_incidence_deg whose own bin of a view holds
   /// no return is no evidence of free space (where the scanner dropped the returns of a face at
   /// grazing incidence it saw nothing through it either), whatever the bins around it saw, and
   /// is not expected to have been seen unless something seen hides it (false: the nearest depth
@@ -237,6 +240,9 @@ struct RecognitionParams {
   /// pose). A point facing the sensor more squarely that returned nothing lay in a shadow: it
   /// still counts (without that limit, flanges "found" in shadows were false positives)
   bool free_space_own_bin = true;
+  /// [deg] the incidence from which free_space_own_bin holds: where the sensor starts dropping
+  /// returns (60 for the Vivid 700); in (0, 90]
+  double own_bin_min_incidence_deg = 60.0;
   bool keep_candidates = false;        ///< fill RecognitionResult::candidates (diagnosis)
 };
 
