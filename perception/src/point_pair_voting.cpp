@@ -64,16 +64,18 @@ int64_t PairFeatureModel::cell(const Eigen::Vector3f& p1, const Eigen::Vector3f&
 }
 
 PairFeatureModel::PairFeatureModel(const PointCloud& model_points, const PairVotingParams& params) : params_(params) {
-  if (!(params.step_m > 0) || params.angle_bins < 2 || params.angle_bins > 255 || params.alpha_bins < 4 || params.alpha_bins > 4096 || params.reference_stride < 1 || params.peaks_per_reference < 1 ||
-      !(params.max_cell_share > 0 && params.max_cell_share <= 1))
+  if (!(params.step_m > 0) || params.angle_bins < 2 || params.angle_bins > 255 || params.alpha_bins < 4 || params.alpha_bins > 4096 ||
+      params.reference_stride < 1 || params.peaks_per_reference < 1 || !(params.max_cell_share > 0 && params.max_cell_share <= 1))
     throw Error("point-pair voting: step " + std::to_string(params.step_m) + " m must be positive, angle bins " +
-                std::to_string(params.angle_bins) + " from 2 to 255, alpha bins " + std::to_string(params.alpha_bins) + " from 4 to 4096, reference stride " +
+                std::to_string(params.angle_bins) + " from 2 to 255, alpha bins " + std::to_string(params.alpha_bins) +
+                " from 4 to 4096, reference stride " +
                 std::to_string(params.reference_stride) + " and peaks " + std::to_string(params.peaks_per_reference) +
                 " at least 1, and max_cell_share " + std::to_string(params.max_cell_share) + " in (0, 1]");
   if (model_points.normals.size() != model_points.points.size()) throw Error("point-pair voting: the model points have no normals");
   // An angle's bin from its cosine without the arc cosine: the cosines where bins start, and a
   // first guess by slots of 1/2048 of the cosine's range.
-  for (int k = 0; k < params.angle_bins; ++k) bin_start_cosine_.push_back(std::cos(static_cast<float>(k) * std::numbers::pi_v<float> / static_cast<float>(params.angle_bins)));
+  for (int k = 0; k < params.angle_bins; ++k)
+    bin_start_cosine_.push_back(std::cos(static_cast<float>(k) * std::numbers::pi_v<float> / static_cast<float>(params.angle_bins)));
   for (size_t i = 0; i < angle_bin_of_cosine_.size(); ++i) {
     const double angle = std::acos((static_cast<double>(i) + 0.5) / (kCosineSlots / 2) - 1);
     angle_bin_of_cosine_[i] = static_cast<uint8_t>(std::min(params.angle_bins - 1, static_cast<int>(angle / std::numbers::pi * params.angle_bins)));
@@ -84,6 +86,9 @@ PairFeatureModel::PairFeatureModel(const PointCloud& model_points, const PairVot
   distance_bins_ = static_cast<int>(diameter_ / params.step_m) + 1;
   const auto& p = points_.points;
   const auto& n = points_.normals;
+  if (p.size() > (size_t{1} << 16))
+    throw Error("point-pair voting: " + std::to_string(p.size()) + " model points at step " + std::to_string(params.step_m) +
+                " m exceed the table's 65536; use a coarser step");
   std::vector<AlphaFrame> frames;
   for (size_t i = 0; i < p.size(); ++i) T_local_model_.push_back(to_local(p[i], n[i])), frames.push_back(alpha_frame(T_local_model_[i], p[i]));
   const auto a = static_cast<size_t>(params.angle_bins);
@@ -102,9 +107,6 @@ PairFeatureModel::PairFeatureModel(const PointCloud& model_points, const PairVot
     if (static_cast<double>(count[c]) > cap) dropped_ += count[c], count[c] = 0;
     offsets_[c + 1] = offsets_[c] + count[c];
   }
-  if (p.size() > (size_t{1} << 16))
-    throw Error("point-pair voting: " + std::to_string(p.size()) + " model points at step " + std::to_string(params.step_m) +
-                " m exceed the table's 65536; use a coarser step");
   entries_.resize(offsets_.back());
   std::vector<uint32_t> fill(offsets_.begin(), offsets_.end() - 1);
   for (size_t i = 0; i < p.size(); ++i)
@@ -156,7 +158,7 @@ std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std
         // alias the offsets), and each entry one word, its model point over its alpha_m; the
         // rotation alpha_s - alpha_m modulo a turn, times the bins, over 2^16 is its bin.
         uint32_t* const votes = accumulator.data();
-        const uint32_t bins = params_.alpha_bins;
+        const auto bins = static_cast<uint32_t>(params_.alpha_bins);
         const uint32_t* const end = entries_.data() + offsets_[static_cast<size_t>(c) + 1];
         for (const uint32_t* e = entries_.data() + offsets_[static_cast<size_t>(c)]; e != end; ++e)
           ++votes[(*e >> 16) * bins + ((((alpha_s - *e) & 0xffffu) * bins) >> 16)];

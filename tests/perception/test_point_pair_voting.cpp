@@ -99,6 +99,19 @@ TEST(PointPairVoting, BadParametersThrow) {
   params = {};
   params.alpha_bins = 2;
   EXPECT_THROW(detail::PairFeatureModel(model, params), Error);
+  params.alpha_bins = 5000;  // rotations are held in 65536ths of a turn
+  EXPECT_THROW(detail::PairFeatureModel(model, params), Error);
+  params = {};
+  params.angle_bins = 256;  // a bin is one byte in the cosine table
+  EXPECT_THROW(detail::PairFeatureModel(model, params), Error);
+  // More than 65536 points at the step: refused before the table of every pair (90,000 squared
+  // cells) is allocated.
+  PointCloud dense;
+  for (int i = 0; i < 300; ++i)
+    for (int j = 0; j < 300; ++j) dense.points.emplace_back(0.001f * i, 0.001f * j, 0), dense.normals.emplace_back(0, 0, 1);
+  params = {};
+  params.step_m = 0.0005;
+  EXPECT_THROW(detail::PairFeatureModel(dense, params), Error);
   PointCloud no_normals;
   no_normals.points = model.points;
   EXPECT_THROW(detail::PairFeatureModel(no_normals, {}), Error);
