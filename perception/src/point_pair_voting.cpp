@@ -130,7 +130,7 @@ std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std
   const auto& s = samples.points;
   const auto& sn = samples.normals;
   const size_t model_points = points_.points.size();
-  const auto alpha_bins = static_cast<size_t>(params_.alpha_bins);
+  const auto alpha_bins = static_cast<uint32_t>(params_.alpha_bins);
   const float radius = static_cast<float>(diameter_);
 
   // Per reference point: its accumulator's peaks, as poses with their votes (eq. 3-4).
@@ -158,10 +158,9 @@ std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std
         // alias the offsets), and each entry one word, its model point over its alpha_m; the
         // rotation alpha_s - alpha_m modulo a turn, times the bins, over 2^16 is its bin.
         uint32_t* const votes = accumulator.data();
-        const auto bins = static_cast<uint32_t>(params_.alpha_bins);
         const uint32_t* const end = entries_.data() + offsets_[static_cast<size_t>(c) + 1];
         for (const uint32_t* e = entries_.data() + offsets_[static_cast<size_t>(c)]; e != end; ++e)
-          ++votes[(*e >> 16) * bins + ((((alpha_s - *e) & 0xffffu) * bins) >> 16)];
+          ++votes[(*e >> 16) * alpha_bins + ((((alpha_s - *e) & 0xffffu) * alpha_bins) >> 16)];
       }
       // The largest cells, at most peaks_per_reference of them.
       auto& mine = peaks[k];

@@ -97,7 +97,7 @@ class FreeSpace {
   ///    the object cannot be): the nearest in the 3 x 3 bins around its own;
   ///  - occluded when something the sensor saw lies in front of it: no evidence either way, so it
   ///    counts neither for nor against.
-  /// With own_bin_only, a point met beyond 60 degrees of incidence whose own bin holds no return
+  /// With own_bin_only, a point met beyond the grazing incidence whose own bin holds no return
   /// (a face at grazing incidence whose returns the scanner dropped) is no evidence either way
   /// unless something the sensor saw hides it (it counts as occluded).
   Check check(const PointCloud& model, const Transform& T) const {
