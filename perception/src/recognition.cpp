@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <deque>
 #include <cmath>
@@ -100,10 +101,12 @@ class FreeSpace {
   /// With own_bin_only, a point met beyond the grazing incidence whose own bin holds no return
   /// (a face at grazing incidence whose returns the scanner dropped) is no evidence either way
   /// unless something the sensor saw hides it (it counts as occluded).
-  Check check(const PointCloud& model, const Transform& T) const {
+  /// Without `silhouette`, `continued` (two thirds of the work) is not measured: NaN.
+  Check check(const PointCloud& model, const Transform& T, bool silhouette = true) const {
     Check c;
     if (maps_.empty()) return c;
     std::vector<Eigen::Vector3d> p(model.points.size()), n(model.points.size());
+#pragma omp parallel for schedule(static)
     for (size_t i = 0; i < p.size(); ++i) {
       p[i] = T * model.points[i].cast<double>();
       n[i] = T.linear() * model.normals[i].cast<double>();
@@ -122,12 +125,15 @@ class FreeSpace {
     std::vector<std::optional<Key>> keys(p.size());
     for (const auto& m : maps_) {
       self.clear();
+#pragma omp parallel for schedule(static)
+      for (size_t i = 0; i < p.size(); ++i) keys[i] = m.key(p[i]);
       for (size_t i = 0; i < p.size(); ++i) {
-        keys[i] = m.key(p[i]);
         if (!keys[i] || n[i].dot(m.toward(p[i])) <= 0) continue;
         auto [it, inserted] = self.try_emplace(Map::pack(keys[i]->u, keys[i]->v), keys[i]->depth);
         if (!inserted) it->second = std::min(it->second, keys[i]->depth);
       }
+      // Each point's own entries only: the points are independent.
+#pragma omp parallel for schedule(dynamic, 256)
       for (size_t i = 0; i < p.size(); ++i) {
         if (!keys[i]) continue;
         const double incidence_cos = n[i].dot(m.toward(p[i]).normalized());
@@ -176,14 +182,17 @@ class FreeSpace {
     // continued when a scene point within 3 resolutions, off the model (farther than 1.5
     // resolutions from all its points), lies on its tangent plane (within half a resolution)
     // with a normal within 25 degrees of its own.
-    if (did) {
+    if (!silhouette) c.continued = std::numeric_limits<double>::quiet_NaN();
+    else if (did) {
       std::vector<char> on_model(scene_.points.size(), 0);
       std::vector<size_t> around;
+#pragma omp parallel for schedule(dynamic, 256) private(around)
       for (size_t i = 0; i < p.size(); ++i) {
         tree_.within(p[i].cast<float>(), static_cast<float>(1.5 * resolution_), around);
-        for (const size_t s : around) on_model[s] = 1;
+        for (const size_t s : around) std::atomic_ref<char>(on_model[s]).store(1, std::memory_order_relaxed);
       }
       size_t continued = 0;
+#pragma omp parallel for schedule(dynamic, 256) private(around) reduction(+ : continued)
       for (size_t i = 0; i < p.size(); ++i) {
         if (!expected[i] || !seen_there[i]) continue;
         const Eigen::Vector3f pi = p[i].cast<float>(), ni = n[i].cast<float>();
@@ -912,6 +921,16 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
            seen.planarity <= params.max_support_planarity + slack.planarity && seen.continued <= slack.continued * params.max_continued_fraction;
   };
   const auto passes = [&](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(icp, seen, {}); };
+  // Whether the model at T meets the tests with `slack`, its check in `seen`: the silhouette (two
+  // thirds of a check's work) is measured only when the other tests pass (else `continued` is NaN).
+  const auto checked = [&](const PointCloud& model, const IcpResult& icp, const Transform& T, const Slack& slack, FreeSpace::Check& seen) {
+    seen = free_space.check(model, T, false);
+    FreeSpace::Check without = seen;
+    without.continued = 0;
+    if (!meets(icp, without, slack)) return false;
+    seen = free_space.check(model, T);
+    return meets(icp, seen, slack);
+  };
   // A coarse pose far from passing is refused without the fine ICP, which moves a pose by a
   // fraction of a resolution (on the clutter bench's first 12 scenes this screen let through all
   // 48 coarse poses that went on to pass, and stopped 482 of the 688 that failed).
@@ -1042,7 +1061,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
         // or turned on a box top) would be refused again: not refined.
         if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
-        if (!meets(v.icp, v.seen.emplace(free_space.check(model, v.T)), promising)) continue;
+        if (!checked(model, v.icp, v.T, promising, v.seen.emplace())) continue;
         ++refined;
         v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
         v.T = v.icp.T_target_source;
