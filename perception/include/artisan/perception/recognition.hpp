@@ -271,6 +271,8 @@ struct RecognizedInstance {
 struct RecognitionCandidate {
   size_t model_index = 0;
   Transform T_scene_model = Transform::Identity();
+  /// continued_fraction is NaN where not measured: a coarse pose refused by the screen before
+  /// the fine ICP on its other tests (the silhouette test is most of a check's work)
   double overlap_fraction = 0, rmse_m = 0, free_space_fraction = 0, visible_explained = 1, occluded_fraction = 0, continued_fraction = 0;
   double support_planarity = 0;   ///< 1: the scene surface it explains is one plane
   size_t correspondences = 0;     ///< in its group; for a pair or voting hypothesis, the sampled model points it put on the scene
