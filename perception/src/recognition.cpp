@@ -101,8 +101,13 @@ class FreeSpace {
   /// With own_bin_only, a point met beyond the grazing incidence whose own bin holds no return
   /// (a face at grazing incidence whose returns the scanner dropped) is no evidence either way
   /// unless something the sensor saw hides it (it counts as occluded).
-  /// Without `silhouette`, `continued` (two thirds of the work) is not measured: NaN.
-  Check check(const PointCloud& model, const Transform& T, bool silhouette = true) const {
+  Check check(const PointCloud& model, const Transform& T) const {
+    return check(model, T, [](const Check&) { return true; });
+  }
+  /// The same, measuring `continued` (two thirds of the work) only when `worth_it` holds for
+  /// the rest of the check (`continued` 0 then); else it is NaN, not measured.
+  template <typename WorthIt>
+  Check check(const PointCloud& model, const Transform& T, const WorthIt& worth_it) const {
     Check c;
     if (maps_.empty()) return c;
     std::vector<Eigen::Vector3d> p(model.points.size()), n(model.points.size());
@@ -182,7 +187,7 @@ class FreeSpace {
     // continued when a scene point within 3 resolutions, off the model (farther than 1.5
     // resolutions from all its points), lies on its tangent plane (within half a resolution)
     // with a normal within 25 degrees of its own.
-    if (!silhouette) c.continued = std::numeric_limits<double>::quiet_NaN();
+    if (!worth_it(c)) c.continued = std::numeric_limits<double>::quiet_NaN();
     else if (did) {
       std::vector<char> on_model(scene_.points.size(), 0);
       std::vector<size_t> around;
@@ -921,16 +926,6 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
            seen.planarity <= params.max_support_planarity + slack.planarity && seen.continued <= slack.continued * params.max_continued_fraction;
   };
   const auto passes = [&](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(icp, seen, {}); };
-  // Whether the model at T meets the tests with `slack`, its check in `seen`: the silhouette (two
-  // thirds of a check's work) is measured only when the other tests pass (else `continued` is NaN).
-  const auto checked = [&](const PointCloud& model, const IcpResult& icp, const Transform& T, const Slack& slack, FreeSpace::Check& seen) {
-    seen = free_space.check(model, T, false);
-    FreeSpace::Check without = seen;
-    without.continued = 0;
-    if (!meets(icp, without, slack)) return false;
-    seen = free_space.check(model, T);
-    return meets(icp, seen, slack);
-  };
   // A coarse pose far from passing is refused without the fine ICP, which moves a pose by a
   // fraction of a resolution (on the clutter bench's first 12 scenes this screen let through all
   // 48 coarse poses that went on to pass, and stopped 482 of the 688 that failed).
@@ -1061,7 +1056,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
         // or turned on a box top) would be refused again: not refined.
         if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
-        if (!checked(model, v.icp, v.T, promising, v.seen.emplace())) continue;
+        // The silhouette is measured only for a pose that passes the screen's other tests.
+        const auto screened = [&](const FreeSpace::Check& rest) { return meets(v.icp, rest, promising); };
+        if (!meets(v.icp, v.seen.emplace(free_space.check(model, v.T, screened)), promising)) continue;
         ++refined;
         v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
         v.T = v.icp.T_target_source;
