@@ -5,7 +5,9 @@
 // simulated Minolta Vivid 700 from a random azimuth. The ground truth gives each instance's pose
 // and visible fraction (visible / unoccluded pixels, so occlusion = 1 - visible fraction; the
 // unoccluded pixels are counted on an image plane wider than the frame, so what the frame cuts
-// off counts as occluded: the tables are in view, but a pipe may reach beyond the frame).
+// off counts as occluded: the tables are in view, but a pipe may reach beyond the frame; the
+// visible ones are those the scanner measures, so a part in its laser's shadow - fallen to the
+// floor below the table's near edge - is occluded however plainly the camera sees it).
 //
 // Scored per occlusion band (0-30%, 30-50%, 50-70%, 70-85%; instances occluded more are not
 // scored): an instance is found when a detection of its model is

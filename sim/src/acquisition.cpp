@@ -72,10 +72,10 @@ namespace {
 
 std::vector<ObjectTruth> object_truth(Renderer& renderer, const Workcell& cell, const PinholeCamera& camera,
                                       const Transform& T_world_camera, const std::vector<uint16_t>& instance_ids,
-                                      double near_m, double far_m) {
+                                      const std::vector<char>& measurable, double near_m, double far_m) {
   std::vector<int> visible(cell.bodies.size() + 1, 0);
-  for (uint16_t id : instance_ids)
-    if (id > 0 && id <= cell.bodies.size()) ++visible[id];
+  for (size_t i = 0; i < instance_ids.size(); ++i)
+    if (const uint16_t id = instance_ids[i]; id > 0 && id <= cell.bodies.size() && (measurable.empty() || measurable[i])) ++visible[id];
   std::vector<ObjectTruth> out;
   // Alone, on an image plane three times as wide and high (same pixels, same principal ray): what
   // lies outside the sensor's frame counts as hidden too. A pipe half out of the frame is half
@@ -111,13 +111,15 @@ std::vector<ObjectTruth> object_truth(Renderer& renderer, const Workcell& cell, 
 
 GroundTruth view_truth(Renderer& renderer, const Workcell& cell, const std::string& sensor_kind, uint64_t seed,
                        const PinholeCamera& camera, const Transform& T_world_sensor, std::vector<uint16_t> instance_ids,
-                       std::vector<float> depth_m, double near_m, double far_m) {
+                       std::vector<float> depth_m, double near_m, double far_m, const std::vector<char>& measurable) {
+  if (!measurable.empty() && measurable.size() != instance_ids.size())
+    throw Error("view_truth: " + std::to_string(measurable.size()) + " measurable flags for " + std::to_string(instance_ids.size()) + " pixels");
   GroundTruth t;
   t.sensor_kind = sensor_kind;
   t.seed = seed;
   t.T_world_sensor = T_world_sensor;
   t.camera = camera;
-  t.objects = object_truth(renderer, cell, camera, T_world_sensor, instance_ids, near_m, far_m);
+  t.objects = object_truth(renderer, cell, camera, T_world_sensor, instance_ids, measurable, near_m, far_m);
   t.instance_ids = std::move(instance_ids);
   t.depth_m = std::move(depth_m);
   return t;

@@ -112,6 +112,7 @@ Acquisition scan_vivid(Renderer& renderer, const Workcell& cell, const Transform
   RangeImage& r = acq.range;
   r = RangeImage::empty_of_size(W, H);
   Rng rng(seed);
+  std::vector<char> measurable(static_cast<size_t>(W) * H, 0);  // in range and lit: what the scanner can measure
   for (int v = 0; v < H; ++v) {
     for (int u = 0; u < W; ++u) {
       const size_t i = static_cast<size_t>(v) * W + u;
@@ -140,6 +141,7 @@ Acquisition scan_vivid(Renderer& renderer, const Workcell& cell, const Transform
         }
       if (outside) continue;
       if (pl.z() > lit_depth + p.shadow_tolerance_m + 0.002 * pl.z()) continue;
+      measurable[i] = 1;  // what is lost from here on is noise (grazing, dropouts), not hidden
       // Grazing incidence, for the camera or the laser, whichever is worse.
       const Eigen::Vector3f n = pixel_normal(points_true, truth.depth_m, W, H, u, v);
       if (n.squaredNorm() > 0) {
@@ -166,7 +168,7 @@ Acquisition scan_vivid(Renderer& renderer, const Workcell& cell, const Transform
   cam.camera = color_cam;
   r.images.push_back(std::move(cam));
 
-  acq.truth = view_truth(renderer, cell, r.sensor.kind, seed, range_cam, T_world_sensor, truth.instance_ids, truth.depth_m, near_m, far_m);
+  acq.truth = view_truth(renderer, cell, r.sensor.kind, seed, range_cam, T_world_sensor, truth.instance_ids, truth.depth_m, near_m, far_m, measurable);
   return acq;
 }
 

@@ -427,7 +427,7 @@ void expect_found_only_with(const std::string& scene, const std::string& missed,
 // A valve's body and ends are nearly a surface of revolution about its run; only its stem and
 // hand wheel say how far it is turned about it. Method: bench_recognition's scene 9
 // (data/recognition/clutter-scene9: eight parts and distractors piled on a table, one simulated
-// Vivid view), where the valve is 1% occluded. Without the turn search (turn_steps 0) the valve
+// Vivid view), where the valve is 8% occluded. Without the turn search (turn_steps 0) the valve
 // is "found" turned 127.5 degrees about its run, the wheel where nothing contradicts it - which
 // this test expects, so that the scene keeps testing the search; with it, the valve must be found
 // at its pose (MSSD within 10% of its diameter; its half turn about the stem is a symmetry).
@@ -467,7 +467,7 @@ TEST(Recognition, AValveFoundTurnedAboutItsRunIsTurnedBack) {
 // support and the true tees rank first. Method: bench_recognition's scene 2
 // (data/recognition/clutter-scene2: four tees and three pipes piled on a table with distractors,
 // one simulated Vivid view), recognized with a library of the tee and the pipe. Before the
-// interpretation was joint (each model searched alone, in library order) the two tees 1% and 36%
+// interpretation was joint (each model searched alone, in library order) the two tees 2% and 42%
 // occluded were not found: their true poses ranked 123rd and 126th. Every tee and pipe less than
 // 70% occluded must be found at its pose (MSSD within 10% of its diameter), and nothing else.
 TEST(Recognition, PartsHiddenByFitsOnOtherPartsAreFoundOnceThoseAreExplained) {
@@ -482,7 +482,7 @@ TEST(Recognition, PartsHiddenByFitsOnOtherPartsAreFoundOnceThoseAreExplained) {
       EXPECT_TRUE(found) << o.name << " (" << 100 * (1 - o.visible_fraction) << "% occluded) was not found at its pose";
     }
   }
-  EXPECT_EQ(expected, 6);  // the scene's four tees, one of them 73% occluded, and three pipes
+  EXPECT_EQ(expected, 6);  // the scene's four tees, one of them 78% occluded, and three pipes
   for (const auto& inst : run.result.instances) {
     const float nearest = run.nearest_true(kept, inst);
     EXPECT_LT(nearest, 0.1f * run.models.at(inst.model).diameter)
@@ -498,7 +498,7 @@ TEST(Recognition, PartsHiddenByFitsOnOtherPartsAreFoundOnceThoseAreExplained) {
 // axis) are verified once. Method: bench_recognition's scene 21 (data/recognition/
 // clutter-scene21: three flanges, two valves, an elbow and a pipe with distractors, one
 // simulated Vivid view), recognized with the five-part library as the bench does. Before the
-// change the elbow, 60% occluded, was not found. It and the flange 27% occluded must be found at
+// change the elbow, 68% occluded, was not found. It and the flange 28% occluded must be found at
 // their poses (MSSD within 10% of the diameter), with at most one false instance (the bench's
 // figure for this scene).
 TEST(Recognition, CoarsePosesFarFromPassingDoNotUseUpTheVerifications) {
@@ -519,7 +519,7 @@ TEST(Recognition, CoarsePosesFarFromPassingDoNotUseUpTheVerifications) {
 // A result is ambiguous when another pose that puts the model's surface elsewhere fits the scene
 // about as well; a turn about the part's own symmetry (a flange about its axis) is not one.
 // Method: bench_recognition's scene 40 (data/recognition/clutter-scene40: two tees, two valves,
-// two elbows and a flange with distractors, one simulated Vivid view). The valve 48% occluded has
+// two elbows and a flange with distractors, one simulated Vivid view). The valve 49% occluded has
 // its stem and hand wheel hidden: it is found turned about its run, and must be reported
 // ambiguous. The flange, unoccluded and found at its pose, must not be (before this change every
 // instance in the scene was: the flange's turns about its axis counted as other poses). Every
@@ -555,7 +555,7 @@ TEST(Recognition, AmbiguousOnlyWhenAnotherSurfaceFitsAsWell) {
 // A straight pipe's body gives neither spin images nor point pairs that place it (its points
 // and pairs all look alike; only its rims fix the shift), so it is also proposed on the scene's
 // cylinder axes of its radius, at every shift along them. Method: bench_recognition's scene 27
-// (data/recognition/clutter-scene27: a pipe 28% occluded, a tee and two elbows with distractors,
+// (data/recognition/clutter-scene27: a pipe 29% occluded, a tee and two elbows with distractors,
 // one simulated Vivid view), recognized with the five-part library as the bench does. Without
 // the axis proposals the pipe is not found (no pose near it); with them it must be, at its pose
 // (MSSD within 10% of its diameter), and every instance must be a true one. Point-pair voting
@@ -577,7 +577,7 @@ TEST(Recognition, APipeIsProposedOnTheSceneCylinderAxes) {
 // surface under it (and that plane as far as the model reaches) out of the model's support.
 // Method: bench_recognition's scene 21 (data/recognition/clutter-scene21), recognized with the
 // five-part library as the bench does, without and with RecognitionParams::drop_refused_planes.
-// Without it the flange 28% occluded is missed (the test fails if it is found: the scene must
+// Without it the flange 32% occluded is missed (the test fails if it is found: the scene must
 // keep testing the change); with it the flange and the pipe, missed before, must be found at
 // their poses (MSSD within 10% of the diameter), and every instance must be a true one.
 // The second search round (RecognitionParams::search_rounds) also finds that flange, by
@@ -594,7 +594,7 @@ TEST(Recognition, ARefusedPlaneNoLongerSupportsTheModel) {
 // grazing incidence: the scanner returns nothing there (the simulated Vivid drops points from
 // 60 degrees and all of them from 80), so "the sensor saw through it" is no evidence.
 // Method: bench_recognition's scene 21 (data/recognition/clutter-scene21), whose flange#2 is
-// unoccluded but seen edge-on (its faces at about 88 degrees to the rays), recognized with the
+// unoccluded (2% in the laser's shadow) but seen edge-on (its faces at about 88 degrees to the rays), recognized with the
 // five-part library without an incidence limit (the default) and with one of 70 degrees
 // (RecognitionParams::max_incidence_deg). Without it the flange must be missed (its true pose
 // leaves a tenth of its sensor-facing surface "in free space"; the test fails if it is found,
@@ -602,7 +602,7 @@ TEST(Recognition, ARefusedPlaneNoLongerSupportsTheModel) {
 // (MSSD within 10% of the diameter), and every instance must be a true one.
 // Both tests below hold each other's change off: either finds the flange.
 TEST(Recognition, ASurfaceAtGrazingIncidenceIsNoEvidenceAgainstAPose) {
-  ASSERT_GT(kept_scene("clutter-scene21").object("flange#2")->visible_fraction, 0.99);
+  ASSERT_GT(kept_scene("clutter-scene21").object("flange#2")->visible_fraction, 0.95);
   RecognitionParams without;
   without.free_space_own_bin = false;
   RecognitionParams with = without;
@@ -632,7 +632,7 @@ TEST(Recognition, WhereTheSensorReturnedNothingItSawNoFreeSpace) {
 // ICP; in a crowded scene a part's true pose can rank behind more than five others that are
 // refused. When a search ends without an instance, a second round ranks the starting poses not
 // tried yet and refines the best of them (RecognitionParams::search_rounds, 2 by default).
-// Method: bench_recognition's scene 3 (data/recognition/clutter-scene3), whose flange#1 is 57%
+// Method: bench_recognition's scene 3 (data/recognition/clutter-scene3), whose flange#1 is 58%
 // occluded, recognized with the five-part library as the bench does, with one round and with
 // the default. With one round the flange must be missed (the test fails if it is found, as the
 // scene would no longer test the rounds); with two it must be found at its pose (MSSD within
@@ -647,14 +647,14 @@ TEST(Recognition, ASearchWithoutAnInstanceTriesTheNextStartingPoses) {
 // pose refined a few millimetres short of the seen end leaves the scene's pipe carrying on past
 // the model's outline and is refused by the continued-surface test. Such a pose, refused by a
 // small margin, is now also tried slid along the axis. Method: bench_recognition's scene 44
-// (data/recognition/clutter-scene44), whose pipe_350#1 is unoccluded, recognized with the
+// (data/recognition/clutter-scene44), whose pipe_350#1 is unoccluded (3% in the laser's shadow), recognized with the
 // five-part library as the bench does, without slides (RecognitionParams::axis_slide_steps 0)
 // and with the default. Without them the pipe must be missed (refused with 3.3% of its surface
 // continued against the 3% limit; the test fails if it is found, as the scene would no longer
 // test the slides); with them it must be found at its pose (MSSD within 10% of the diameter),
 // and every instance must be a true one.
 TEST(Recognition, APipeRefusedShortOfItsEndIsSlidAlongItsAxis) {
-  ASSERT_GT(kept_scene("clutter-scene44").object("pipe_350#1")->visible_fraction, 0.99);
+  ASSERT_GT(kept_scene("clutter-scene44").object("pipe_350#1")->visible_fraction, 0.95);
   RecognitionParams without;
   without.axis_slide_steps = 0;
   expect_found_only_with("clutter-scene44", "pipe_350#1", {"pipe_350#1"}, "slides along the axis", without, {});

@@ -1,6 +1,7 @@
 // The simulated Minolta Vivid 700: noise statistics, shadowing, grazing dropouts, determinism.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -137,6 +138,31 @@ TEST(SimVivid, DeterministicForASeed) {
   EXPECT_EQ(a.range.width, 200);
   EXPECT_EQ(a.range.images.at(0).image.width, 400);
   EXPECT_EQ(a.range.sensor.kind, "minolta-vivid-700");
+}
+
+// Method: a 3 cm cube against the wall, in the laser shadow of the 10 cm cube of the test above
+// (the wall's shadow there spans y = 0.01 to 0.2 m; the camera sees past the big cube's image up
+// to y = 0.09 m on the wall, so the small cube at y = 0.135 to 0.165 m is in plain view of the
+// camera and lit by nothing). The scanner measures nothing on it, so the ground truth must call
+// it unseen: visible fraction 0 though the camera's instance image shows it over 50 pixels. The
+// big cube, lit, is all visible.
+TEST(SimVivid, WhatTheLaserCannotReachIsNotVisible) {
+  auto cell = cell_of({wall_at(1.5), box_body("cube", {0.1, 0.1, 0.1}, at(0, 0, 0.9)), box_body("small", {0.03, 0.03, 0.03}, at(0, 0.15, 1.47))});
+  Renderer renderer(cell);
+  const auto acq = scan_vivid(renderer, cell, Transform::Identity(), no_random_dropouts(), 5);
+  const auto& big = acq.truth.objects.at(1);
+  const auto& small = acq.truth.objects.at(2);
+  ASSERT_EQ(small.name, "small");
+  const auto in_image = std::count(acq.truth.instance_ids.begin(), acq.truth.instance_ids.end(), static_cast<uint16_t>(small.instance_id));
+  size_t measured = 0;
+  for (size_t i = 0; i < acq.range.pixel_count(); ++i) measured += acq.truth.instance_ids[i] == small.instance_id && acq.range.valid[i];
+  std::printf("small cube: %ld camera pixels, %zu measured, visible fraction %.3f; big cube %.3f\n", static_cast<long>(in_image), measured,
+              small.visible_fraction, big.visible_fraction);
+  EXPECT_GT(in_image, 50);
+  EXPECT_EQ(measured, 0u);
+  EXPECT_EQ(small.visible_pixels, 0);
+  EXPECT_EQ(small.visible_fraction, 0.0);
+  EXPECT_GT(big.visible_fraction, 0.95);
 }
 
 // Method: the ground truth's visible fraction counts what lies outside the sensor's frame as

@@ -28,7 +28,7 @@ struct ObjectTruth {
   std::string model;             ///< the library model it is an instance of (Body::model); "" for none
   BodyRole role = BodyRole::structure;
   Transform T_world_object = Transform::Identity();
-  int visible_pixels = 0;        ///< pixels of this instance in the acquisition's instance image
+  int visible_pixels = 0;        ///< pixels of this instance in the acquisition's instance image that the sensor can measure
   /// pixels it covers when rendered alone from the same view, on an image plane three times as
   /// wide and high as the sensor's (what lies outside the frame is not seen either)
   int unoccluded_pixels = 0;
@@ -69,9 +69,12 @@ std::vector<uint16_t> read_png16(const std::filesystem::path& path, int& width, 
 /// The ground truth of one view: the sensor's kind, seed, pose and pixel grid, the noise-free
 /// instance ids and depth, and every body's pose and visible fraction (each body rendered alone,
 /// instance pass only, from the same view). Name, time, joints and environment are the caller's.
+/// `measurable` (per pixel, empty: all) marks the pixels the sensor can measure at all - for a
+/// triangulation scanner those in its range and lit by its laser: a surface in the laser's
+/// shadow gives no data, so it is not visible, however plainly the camera sees it.
 class Renderer;
 GroundTruth view_truth(Renderer& renderer, const Workcell& cell, const std::string& sensor_kind, uint64_t seed,
                        const PinholeCamera& camera, const Transform& T_world_sensor, std::vector<uint16_t> instance_ids,
-                       std::vector<float> depth_m, double near_m, double far_m);
+                       std::vector<float> depth_m, double near_m, double far_m, const std::vector<char>& measurable = {});
 
 }  // namespace artisan::sim
