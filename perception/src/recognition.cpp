@@ -38,16 +38,45 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
+// The plane with the most oriented points on it (within `distance`, normals within 20 degrees),
+// of those not `taken`: RANSAC, 150 tries from single oriented points.
+struct Plane {
+  Eigen::Vector3f normal = Eigen::Vector3f::Zero();
+  float offset = 0, distance = 0;
+  size_t count = 0;
+  bool holds(const Eigen::Vector3f& p, const Eigen::Vector3f& n) const {
+    return std::abs(normal.dot(p) - offset) <= distance && std::abs(normal.dot(n)) >= std::cos(20.0f * std::numbers::pi_v<float> / 180);
+  }
+};
+Plane largest_plane(const PointCloud& cloud, const std::vector<char>& taken, double distance, uint64_t& state) {
+  Plane best;
+  const size_t n = cloud.points.size();
+  if (n < 3 || cloud.normals.size() != n) return best;
+  const auto next = [&] {
+    state ^= state << 13, state ^= state >> 7, state ^= state << 17;
+    return state;
+  };
+  for (int it = 0; it < 150; ++it) {
+    const size_t s = next() % n;
+    if (taken[s]) continue;
+    Plane candidate{.normal = cloud.normals[s], .offset = cloud.normals[s].dot(cloud.points[s]), .distance = static_cast<float>(distance)};
+    for (size_t i = 0; i < n; ++i) candidate.count += !taken[i] && candidate.holds(cloud.points[i], cloud.normals[i]);
+    if (candidate.count > best.count) best = candidate;
+  }
+  return best;
+}
+
 // What each sensor saw of the scene, for the free-space test: per view, the nearest scene depth
 // in each bin of a projection (gnomonic about the view's main direction for perspective rays, an
 // orthographic grid for parallel rays).
 class FreeSpace {
  public:
   FreeSpace(const PointCloud& scene, const KdTree3& scene_tree, const std::vector<SensorView>& views, double resolution_m,
-            double tolerance_m, double max_incidence_rad, size_t largest_model_points, bool own_bin_only, double own_bin_min_incidence_rad)
+            double tolerance_m, double max_incidence_rad, size_t largest_model_points, size_t largest_model_plane, bool own_bin_only,
+            double own_bin_min_incidence_rad)
       : scene_(scene), tree_(scene_tree), resolution_(resolution_m), tolerance_(tolerance_m), min_incidence_cos_(std::cos(max_incidence_rad)),
         own_bin_only_(own_bin_only), grazing_cos_(std::cos(own_bin_min_incidence_rad)) {
-    find_background_planes(largest_model_points);
+    find_background_planes(largest_model_points, largest_model_plane);
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     for (const auto& p : scene.points) centroid += p.cast<double>();
     if (!scene.points.empty()) centroid /= static_cast<double>(scene.points.size());
@@ -215,37 +244,49 @@ class FreeSpace {
 
   /// Per scene point: on a background plane (a plane larger than any model's whole surface).
   const std::vector<char>& background() const { return background_; }
+  /// Per scene point: on a support plane (a connected planar region larger than any model's
+  /// planar part: a table top seen between the parts on it).
+  const std::vector<char>& support() const { return support_; }
 
  private:
-  // Planes of the scene larger than any model's whole surface (more points than the largest
-  // model has at the same resolution): RANSAC on oriented points, the largest first, up to three.
-  void find_background_planes(size_t largest_model_points) {
-    background_.assign(scene_.points.size(), 0);
+  // Planes of the scene larger than any model's planar part (more points than
+  // `largest_model_plane`), the largest first, up to three. Background: a whole plane larger than
+  // any model's whole surface (more points than `largest_model_points` has at the same
+  // resolution). Support: a connected region of such a plane larger than any model's planar part
+  // (the tops of pipes lying side by side on a table are one plane, but apart).
+  void find_background_planes(size_t largest_model_points, size_t largest_model_plane) {
     const size_t n = scene_.points.size();
+    background_.assign(n, 0);
+    support_.assign(n, 0);
     if (n < 3 || scene_.normals.size() != n) return;
-    const float distance = static_cast<float>(resolution_), cos_angle = std::cos(20.0f * std::numbers::pi_v<float> / 180);
+    std::vector<char> taken(n, 0), on(n, 0);
+    std::vector<size_t> stack, component, around;
     uint64_t state = 0x9e3779b97f4a7c15ull;
-    const auto next = [&] {
-      state ^= state << 13, state ^= state >> 7, state ^= state << 17;
-      return state;
-    };
     for (int plane = 0; plane < 3; ++plane) {
-      size_t best_count = 0;
-      Eigen::Vector3f best_n = Eigen::Vector3f::Zero();
-      float best_d = 0;
-      for (int it = 0; it < 150; ++it) {
-        const size_t s = next() % n;
-        if (background_[s]) continue;
-        const Eigen::Vector3f nn = scene_.normals[s];
-        const float d = nn.dot(scene_.points[s]);
-        size_t count = 0;
-        for (size_t i = 0; i < n; ++i)
-          count += !background_[i] && std::abs(nn.dot(scene_.points[i]) - d) <= distance && std::abs(nn.dot(scene_.normals[i])) >= cos_angle;
-        if (count > best_count) best_count = count, best_n = nn, best_d = d;
+      const auto best = largest_plane(scene_, taken, resolution_, state);
+      if (best.count <= largest_model_plane) break;
+      const bool background = best.count > largest_model_points;
+      for (size_t i = 0; i < n; ++i) {
+        on[i] = best.holds(scene_.points[i], scene_.normals[i]);
+        taken[i] |= on[i];
+        background_[i] |= on[i] && background;
       }
-      if (best_count <= largest_model_points) break;
-      for (size_t i = 0; i < n; ++i)
-        if (std::abs(best_n.dot(scene_.points[i]) - best_d) <= distance && std::abs(best_n.dot(scene_.normals[i])) >= cos_angle) background_[i] = 1;
+      for (size_t seed = 0; seed < n; ++seed) {
+        if (on[seed] != 1) continue;
+        component.clear();
+        stack.assign(1, seed);
+        on[seed] = 2;
+        while (!stack.empty()) {
+          const size_t i = stack.back();
+          stack.pop_back();
+          component.push_back(i);
+          tree_.within(scene_.points[i], static_cast<float>(2 * resolution_), around);
+          for (const size_t j : around)
+            if (on[j] == 1) on[j] = 2, stack.push_back(j);
+        }
+        if (component.size() > largest_model_plane)
+          for (const size_t i : component) support_[i] = 1;
+      }
     }
   }
 
@@ -297,6 +338,7 @@ class FreeSpace {
   /// more squarely that returned nothing lay in a shadow.
   double grazing_cos_;
   std::vector<char> background_;  ///< per scene point: on a background plane
+  std::vector<char> support_;     ///< per scene point: on a support plane
   std::vector<Map> maps_;
 };
 
@@ -861,11 +903,23 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // "found" on a pipe explains less of it than the pipe does, so the pipe is accepted first, and
   // the tee's hypotheses there lose their support to it.
   t0 = Clock::now();
-  size_t largest_model = 0;
-  for (size_t m = 0; m < library.model_count(); ++m) largest_model = std::max(largest_model, library.model_points(m).points.size());
+  size_t largest_model = 0, largest_planar_part = 0;
+  for (size_t m = 0; m < library.model_count(); ++m) {
+    const PointCloud& model = library.model_points(m);
+    largest_model = std::max(largest_model, model.points.size());
+    if (!params.no_votes_on_support) continue;
+    uint64_t state = 0x9e3779b97f4a7c15ull;
+    largest_planar_part = std::max(largest_planar_part, largest_plane(model, std::vector<char>(model.points.size(), 0), res, state).count);
+  }
+  // Support planes are looked for only when they are used (else only the background planes).
+  const size_t smallest_support = params.no_votes_on_support ? 2 * largest_planar_part : largest_model;
   const FreeSpace free_space(scene_points, scene_tree, params.views, res, params.free_space_tolerance_factor * res,
-                             params.max_incidence_deg * std::numbers::pi / 180, largest_model, params.free_space_own_bin,
+                             params.max_incidence_deg * std::numbers::pi / 180, largest_model, smallest_support, params.free_space_own_bin,
                              params.own_bin_min_incidence_deg * std::numbers::pi / 180);
+  // Scene points that do not vote (neither as reference points nor as partners): those on a
+  // background or a support plane, whose pairs fit any planar part of a model anywhere on them.
+  std::vector<char> no_votes(scene_points.points.size(), 0);
+  for (size_t i = 0; i < no_votes.size(); ++i) no_votes[i] = free_space.background()[i] || (params.no_votes_on_support && free_space.support()[i]);
   // The coarse ICP ranks starting poses, the fine one places and measures the few verified; on
   // the clutter bench halving their samples (from 1500 and 4000) found the same instances
   // (55 against 54 in 16 scenes) in two thirds of the time.
@@ -1141,7 +1195,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     s.same = std::make_unique<SameSurface>(model);
     auto made = pair_hypotheses(model, scene_points, *s.surface_support, s.candidates, res, params);
     const auto t_voting = Clock::now();
-    auto voted = voting_hypotheses(library.pair_features(m), scene_points, free_space.background(), *s.surface_support, res, params);
+    auto voted = voting_hypotheses(library.pair_features(m), scene_points, no_votes, *s.surface_support, res, params);
     result.seconds_voting += since(t_voting);
     made.insert(made.end(), std::make_move_iterator(voted.begin()), std::make_move_iterator(voted.end()));
     if (const auto* cylinder = library.cylinder(m); cylinder && params.axis_hypotheses) {
