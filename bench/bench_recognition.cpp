@@ -273,6 +273,9 @@ int main(int argc, char** argv) {
       else if (k == "max_candidates_verified") tuned.max_candidates_verified = int(v);
       else if (k == "turn_steps") tuned.turn_steps = int(v);
       else if (k == "turn_margin") tuned.turn_margin = v;
+      else if (k == "rivals") tuned.rivals = int(v);
+      else if (k == "rival_margin") tuned.rival_margin = v;
+      else if (k == "rival_coarse_slack") tuned.rival_coarse_slack = v;
       else if (k == "min_correlation") tuned.min_correlation = v;
       else if (k == "max_matches_grouped") tuned.max_matches_grouped = size_t(v);
       else if (k == "scene_point_fraction") tuned.scene_point_fraction = v;

@@ -623,14 +623,14 @@ struct Moved {
 // turn_steps) that passes every test (`passes`, and not on an accepted instance: `taken`) and
 // scores more than `score` (T_scene_model's own: the model's share on the scene, less its share
 // in free space) by turn_margin; the best one, refined, or none. And every turn's coarse pose, for
-// the ambiguity test.
+// the ambiguity test. `coarse_overlap`: the coarse ICP's from T_scene_model.
 struct Turns {
   std::optional<Moved> better;
   std::vector<IcpResult> coarse;
 };
 template <typename Passes, typename Taken>
-Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Transform& T_scene_model, double score, const PointCloud& scene,
-               const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& coarse, const IcpSettings& fine, const RecognitionParams& params,
+Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Transform& T_scene_model, double score, double coarse_overlap,
+               const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& coarse, const IcpSettings& fine, const RecognitionParams& params,
                double res, const Passes& passes, const Taken& taken) {
   Turns out;
   if (params.turn_steps < 2) return out;
@@ -638,7 +638,6 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
   std::vector<Moved> turned(3 * (steps - 1));
   // Coarse ICP from every turn; the few that put most of the model on the scene, and more than
   // the coarse ICP does from the pose itself, are refined and checked.
-  const double coarse_overlap = icp_point_to_plane(model, scene, scene_tree, T_scene_model, coarse).overlap_fraction;
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t k = 0; k < turned.size(); ++k) {
     const size_t a = k / (steps - 1);
@@ -1137,13 +1136,44 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       }
     }
     if (!s.winner) return;
+    // Poses at the winner's place that the coarse ICP put about as much of the model on the scene
+    // with were never refined: the winner passed first. A valve turned about its run or a pipe slid
+    // along its axis passes as well as the true pose; the best of those rivals that passes and
+    // fits better (the model's share on the scene, less its share in free space) takes its place.
+    const auto coarse_overlap = [&](const Transform& T) { return icp_point_to_plane(model, scene_points, scene_tree, T, coarse).overlap_fraction; };
+    if (params.rivals > 0) {
+      const auto& w = s.verified[*s.winner];
+      const double bar = coarse_overlap(w.T) - params.rival_coarse_slack;
+      std::vector<size_t> rivals;
+      for (size_t k = *s.winner + 1; k < s.verified.size(); ++k)
+        if (s.verified[k].icp.overlap_fraction >= bar && s.same->centre_distance(s.verified[k].T, w.T) < 0.5 * s.same->diameter()) rivals.push_back(k);
+      std::stable_sort(rivals.begin(), rivals.end(),
+                       [&](size_t a, size_t b) { return s.verified[a].icp.overlap_fraction > s.verified[b].icp.overlap_fraction; });
+      rivals.resize(std::min(rivals.size(), static_cast<size_t>(params.rivals)));
+      std::vector<char> ok(rivals.size(), 0);
+#pragma omp parallel for schedule(dynamic, 1)
+      for (size_t j = 0; j < rivals.size(); ++j) {
+        auto& v = s.verified[rivals[j]];
+        v.origin->done = true;
+        v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
+        v.T = v.icp.T_target_source;
+        v.seen.emplace(free_space.check(model, v.T));
+        ok[j] = passes(v.icp, *v.seen);
+      }
+      double to_beat = w.icp.overlap_fraction - w.seen->free_space + params.rival_margin;
+      for (size_t j = 0; j < rivals.size(); ++j) {
+        const auto& v = s.verified[rivals[j]];
+        const double score = v.icp.overlap_fraction - v.seen->free_space;
+        if (ok[j] && score > to_beat && !taken(v.T)) to_beat = score, s.winner = rivals[j];
+      }
+    }
     // A part whose distinguishing piece is small (a valve's stem and hand wheel, a tee's branch)
     // also fits the scene with its large, nearly symmetric body (the run) turned about its axis
     // and the piece where nothing contradicts it: the winner's turns compete with it, and one
     // that fits about as well makes it ambiguous.
     auto& w = s.verified[*s.winner];
-    auto turns = turns_of(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, scene_points, scene_tree, free_space,
-                          coarse, fine, params, res, passes, taken);
+    auto turns = turns_of(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, coarse_overlap(w.T), scene_points,
+                          scene_tree, free_space, coarse, fine, params, res, passes, taken);
     if (turns.better) {
       w.icp = turns.better->icp;
       w.T = turns.better->icp.T_target_source;
