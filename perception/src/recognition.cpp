@@ -1141,9 +1141,11 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // along its axis passes as well as the true pose; the best of those rivals that passes and
     // fits better (the model's share on the scene, less its share in free space) takes its place.
     const auto coarse_overlap = [&](const Transform& T) { return icp_point_to_plane(model, scene_points, scene_tree, T, coarse).overlap_fraction; };
+    const size_t first_winner = *s.winner;
+    double winner_coarse = coarse_overlap(s.verified[first_winner].T);
     if (params.rivals > 0) {
-      const auto& w = s.verified[*s.winner];
-      const double bar = coarse_overlap(w.T) - params.rival_coarse_slack;
+      const auto& w = s.verified[first_winner];
+      const double bar = winner_coarse - params.rival_coarse_slack;
       std::vector<size_t> rivals;
       for (size_t k = *s.winner + 1; k < s.verified.size(); ++k)
         if (s.verified[k].icp.overlap_fraction >= bar && s.same->centre_distance(s.verified[k].T, w.T) < 0.5 * s.same->diameter()) rivals.push_back(k);
@@ -1166,13 +1168,14 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         const double score = v.icp.overlap_fraction - v.seen->free_space;
         if (ok[j] && score > to_beat && !taken(v.T)) to_beat = score, s.winner = rivals[j];
       }
+      if (*s.winner != first_winner) winner_coarse = coarse_overlap(s.verified[*s.winner].T);
     }
     // A part whose distinguishing piece is small (a valve's stem and hand wheel, a tee's branch)
     // also fits the scene with its large, nearly symmetric body (the run) turned about its axis
     // and the piece where nothing contradicts it: the winner's turns compete with it, and one
     // that fits about as well makes it ambiguous.
     auto& w = s.verified[*s.winner];
-    auto turns = turns_of(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, coarse_overlap(w.T), scene_points,
+    auto turns = turns_of(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, winner_coarse, scene_points,
                           scene_tree, free_space, coarse, fine, params, res, passes, taken);
     if (turns.better) {
       w.icp = turns.better->icp;

@@ -447,7 +447,7 @@ TEST(Recognition, AValveFoundTurnedAboutItsRunIsTurnedBack) {
   RecognitionParams params;
   params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
   // The turn search alone, in the pool it was needed in: with the support plane's votes left out
-  // (the default), and with rivals, the valve is found at its pose without it.
+  // (the default) the valve is found at its pose without it, rivals or not.
   params.no_votes_on_support = false;
   params.rivals = 0;
   for (const int turn_steps : {0, params.turn_steps}) {
@@ -676,7 +676,7 @@ TEST(Recognition, ASearchWithoutAnInstanceTriesTheNextStartingPoses) {
 TEST(Recognition, APipeRefusedShortOfItsEndIsSlidAlongItsAxis) {
   ASSERT_GT(kept_scene("clutter-scene44").object("pipe_350#1")->visible_fraction, 0.95);
   // The slides alone, in the pool they were needed in: with the support plane's votes left out
-  // (the default), and with rivals, the pipe is found without them.
+  // (the default) the pipe is found without them, rivals or not.
   RecognitionParams with;
   with.no_votes_on_support = false;
   with.rivals = 0;
