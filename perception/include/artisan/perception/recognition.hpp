@@ -239,7 +239,8 @@ struct RecognitionParams {
   /// takes its place (0: none). The search takes the first pose that passes in the coarse score's
   /// order, and a valve turned about its run or a pipe slid along its axis passes as well as the
   /// true pose. Clutter bench, 50 scenes, with no_votes_on_support: 191 found and 9 false
-  /// positives against 188 and 12 without rivals (a valve and a tee turned, two pipes slid).
+  /// positives against 188 and 12 without rivals (a valve turned about its run, two pipes slid);
+  /// 1 rival: 189 and 11; 6: 190 and 10.
   int rivals = 3;
   double rival_coarse_slack = 0.01;  ///< [1]
   /// [1] 0.003 also took a tee's true pose back from one turned 180 degrees (scene 6), but lost
