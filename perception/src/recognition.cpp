@@ -630,8 +630,8 @@ struct Turns {
 };
 template <typename Passes, typename Taken>
 Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Transform& T_scene_model, double score, double coarse_overlap,
-               const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& coarse, const IcpSettings& fine, const RecognitionParams& params,
-               double res, const Passes& passes, const Taken& taken) {
+               const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& coarse, const IcpSettings& fine,
+               const RecognitionParams& params, double res, const Passes& passes, const Taken& taken) {
   Turns out;
   if (params.turn_steps < 2) return out;
   const auto steps = static_cast<size_t>(params.turn_steps);
@@ -740,7 +740,7 @@ void SpinImageLibrary::add_precomputed_model(const std::string& name, PointCloud
     throw Error("spin-image library: precomputed model \"" + name + "\" has " + std::to_string(images.rows()) + " x " +
                 std::to_string(images.cols()) + " spin images for " + std::to_string(points.points.size()) + " points; expected " +
                 std::to_string(bins()) + " rows");
-  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}, {}});
+  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}, {}, 0});
   compressed_ = false;
 }
 
@@ -776,6 +776,8 @@ void SpinImageLibrary::compress() {
                                               params_.cylinder_min_share);
         if (c && (!m.cylinder || c->share > m.cylinder->share)) m.cylinder = std::make_shared<const detail::ModelCylinder>(*c);
       }
+      uint64_t state = 0x9e3779b97f4a7c15ull;
+      m.planar_points = largest_plane(m.points, std::vector<char>(m.points.points.size(), 0), params_.resolution_m, state).count;
     }
     if (m.pairs) continue;
     detail::PairVotingParams voting;
@@ -907,11 +909,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   t0 = Clock::now();
   size_t largest_model = 0, largest_planar_part = 0;
   for (size_t m = 0; m < library.model_count(); ++m) {
-    const PointCloud& model = library.model_points(m);
-    largest_model = std::max(largest_model, model.points.size());
-    if (!params.no_votes_on_support) continue;
-    uint64_t state = 0x9e3779b97f4a7c15ull;
-    largest_planar_part = std::max(largest_planar_part, largest_plane(model, std::vector<char>(model.points.size(), 0), res, state).count);
+    largest_model = std::max(largest_model, library.model_points(m).points.size());
+    largest_planar_part = std::max(largest_planar_part, library.planar_points(m));
   }
   // Support planes are looked for only when they are used (else only the background planes).
   const size_t smallest_support = params.no_votes_on_support ? 2 * largest_planar_part : 0;

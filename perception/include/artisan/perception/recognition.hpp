@@ -73,6 +73,8 @@ class SpinImageLibrary {
   const detail::TurnAxes& turn_axes(size_t m) const { return *models_[m].turns; }
   /// Model m's cylinder (ModelLibraryParams::cylinder_min_share), or null (made by compress()).
   const detail::ModelCylinder* cylinder(size_t m) const { return models_[m].cylinder.get(); }
+  /// Points of model m on its largest plane (a flange's face; made by compress()).
+  size_t planar_points(size_t m) const { return models_[m].planar_points; }
 
   struct Match {
     float d2;  ///< squared distance between normalised images (2 - 2 x correlation)
@@ -92,6 +94,7 @@ class SpinImageLibrary {
     std::shared_ptr<const detail::PairFeatureModel> pairs;
     std::shared_ptr<const detail::TurnAxes> turns;
     std::shared_ptr<const detail::ModelCylinder> cylinder;
+    size_t planar_points = 0;
   };
   ModelLibraryParams params_;
   std::vector<Model> models_;
