@@ -7,7 +7,9 @@
 // unoccluded pixels are counted on an image plane wider than the frame, so what the frame cuts
 // off counts as occluded: the tables are in view, but a pipe may reach beyond the frame; the
 // visible ones are those the scanner measures, so a part in its laser's shadow - fallen to the
-// floor below the table's near edge - is occluded however plainly the camera sees it).
+// floor below the table's near edge - or a face met by its rays beyond 80 degrees of incidence,
+// where it never returns anything - a flange seen edge-on - is occluded however plainly the
+// camera sees it).
 //
 // Scored per occlusion band (0-30%, 30-50%, 50-70%, 70-85%; instances occluded more are not
 // scored): an instance is found when a detection of its model is

@@ -141,16 +141,20 @@ Acquisition scan_vivid(Renderer& renderer, const Workcell& cell, const Transform
         }
       if (outside) continue;
       if (pl.z() > lit_depth + p.shadow_tolerance_m + 0.002 * pl.z()) continue;
-      measurable[i] = 1;  // what is lost from here on is noise (grazing, dropouts), not hidden
-      // Grazing incidence, for the camera or the laser, whichever is worse.
+      // Grazing incidence, for the camera or the laser, whichever is worse. Beyond the limit the
+      // scanner never returns anything: not measurable, like a shadow (a flange seen edge-on is
+      // hidden from it however plainly the camera sees its face).
       const Eigen::Vector3f n = pixel_normal(points_true, truth.depth_m, W, H, u, v);
+      double p_drop = 0;
       if (n.squaredNorm() > 0) {
         const double cos_cam = std::abs(n.dot(ps.normalized()));
         const double cos_laser = std::abs(n.cast<double>().dot(pl.normalized()));
         const double incidence = std::acos(std::min(1.0, std::min(cos_cam, cos_laser)));
-        const double p_drop = std::clamp((incidence - p.grazing_start_rad) / (p.grazing_limit_rad - p.grazing_start_rad), 0.0, 1.0);
-        if (n_graze < p_drop) continue;
+        if (incidence >= p.grazing_limit_rad) continue;
+        p_drop = std::clamp((incidence - p.grazing_start_rad) / (p.grazing_limit_rad - p.grazing_start_rad), 0.0, 1.0);
       }
+      measurable[i] = 1;  // what is lost from here on is noise (grazing dropouts, random dropouts), not hidden
+      if (n_graze < p_drop) continue;
       if (n_drop < p.random_dropout) continue;
       // Range noise along the line of sight.
       const double z_noisy = z + vivid_range_sigma(p, z) * n_noise;

@@ -165,6 +165,31 @@ TEST(SimVivid, WhatTheLaserCannotReachIsNotVisible) {
   EXPECT_GT(big.visible_fraction, 0.95);
 }
 
+// Method: a 10 x 10 cm plate 3 mm thick, 1 m in front of the camera, turned about y. Faced at 30
+// degrees it is all visible. Turned 85 degrees its face lies beyond the scanner's grazing limit
+// (80 degrees, where every return drops out): the camera sees the face over more pixels than its
+// edge, but the scanner measures none of it, so the ground truth must count the face as hidden
+// (visible fraction under 0.4) - not as a face the recognizer failed to find.
+TEST(SimVivid, WhatTheScannerNeverReturnsIsNotVisible) {
+  const auto plate = [](double deg) {
+    Transform T = at(0, 0, 1.0);
+    T.rotate(Eigen::AngleAxisd(deg * M_PI / 180, Eigen::Vector3d::UnitY()));
+    auto cell = cell_of({wall_at(1.6), box_body("plate", {0.1, 0.1, 0.003}, T)});
+    Renderer renderer(cell);
+    const auto acq = scan_vivid(renderer, cell, Transform::Identity(), no_random_dropouts(), 4);
+    const auto& o = acq.truth.objects.at(1);
+    EXPECT_EQ(o.name, "plate");
+    size_t measured = 0;
+    for (size_t i = 0; i < acq.range.pixel_count(); ++i) measured += acq.truth.instance_ids[i] == o.instance_id && acq.range.valid[i];
+    std::printf("plate turned %.0f deg: %d pixels alone, %d visible, %zu measured, visible fraction %.3f\n", deg, o.unoccluded_pixels,
+                o.visible_pixels, measured, o.visible_fraction);
+    EXPECT_LE(measured, static_cast<size_t>(o.visible_pixels));
+    return o.visible_fraction;
+  };
+  EXPECT_GT(plate(30), 0.97);
+  EXPECT_LT(plate(85), 0.4);
+}
+
 // Method: the ground truth's visible fraction counts what lies outside the sensor's frame as
 // hidden. A 10 cm cube 0.95 m in front of the camera (focal length 391.6 px, 200 px wide: the
 // frame's right edge is at x = 0.2553 z), centred on that edge, shows its left face (about 8 px

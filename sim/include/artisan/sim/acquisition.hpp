@@ -70,8 +70,9 @@ std::vector<uint16_t> read_png16(const std::filesystem::path& path, int& width, 
 /// instance ids and depth, and every body's pose and visible fraction (each body rendered alone,
 /// instance pass only, from the same view). Name, time, joints and environment are the caller's.
 /// `measurable` (per pixel, empty: all) marks the pixels the sensor can measure at all - for a
-/// triangulation scanner those in its range and lit by its laser: a surface in the laser's
-/// shadow gives no data, so it is not visible, however plainly the camera sees it.
+/// triangulation scanner those in its range, lit by its laser and met by its rays short of the
+/// incidence where every return drops out: a surface in the laser's shadow, or seen edge-on,
+/// gives no data, so it is not visible, however plainly the camera sees it.
 class Renderer;
 GroundTruth view_truth(Renderer& renderer, const Workcell& cell, const std::string& sensor_kind, uint64_t seed,
                        const PinholeCamera& camera, const Transform& T_world_sensor, std::vector<uint16_t> instance_ids,
