@@ -310,6 +310,7 @@ int main(int argc, char** argv) {
       else if (k == "coarse_refined") tuned.coarse_refined = int(v);
       else if (k == "max_instances") tuned.max_instances = int(v);
       else if (k == "max_continued_fraction") tuned.max_continued_fraction = v;
+      else if (k == "max_through_fraction") tuned.max_through_fraction = v;
       else if (k == "no_votes_on_support") tuned.no_votes_on_support = v != 0;
       else if (k == "axis_hypotheses") tuned.axis_hypotheses = v != 0;
       else if (k == "drop_refused_planes") tuned.drop_refused_planes = v != 0;
@@ -476,8 +477,11 @@ int main(int argc, char** argv) {
                        i.occluded_fraction, i.continued_fraction, i.correspondences,
                        i.T_scene_model.translation().x(), i.T_scene_model.translation().y(), i.T_scene_model.translation().z());
           const Transform T_world_model = acquisition.truth.T_world_sensor * i.T_scene_model;
-          std::fprintf(stderr, "    in the world at %.3f %.3f %.3f, its z axis %.2f %.2f %.2f\n", T_world_model.translation().x(), T_world_model.translation().y(),
-                       T_world_model.translation().z(), T_world_model.linear()(0, 2), T_world_model.linear()(1, 2), T_world_model.linear()(2, 2));
+          double lowest = 1e9;  // of its surface, in the world (the table tops are at z = 0.80 m)
+          for (const auto& p : library.model_points(i.model_index).points) lowest = std::min(lowest, (T_world_model * p.cast<double>()).z());
+          std::fprintf(stderr, "    in the world at %.3f %.3f %.3f, its z axis %.2f %.2f %.2f, its lowest point at z = %.3f\n", T_world_model.translation().x(),
+                       T_world_model.translation().y(), T_world_model.translation().z(), T_world_model.linear()(0, 2), T_world_model.linear()(1, 2),
+                       T_world_model.linear()(2, 2), lowest);
         }
       }
       if (!dump.empty())  // every pose of that model tried or proposed, and how far from the nearest true instance
@@ -486,9 +490,9 @@ int main(int argc, char** argv) {
           double nearest = 1e9;
           for (const auto& inst : truth)
             if (inst.model == dump) nearest = std::min(nearest, symmetric_distance(*by_name.at(inst.model), inst.T_sensor_object, c.T_scene_model));
-          std::fprintf(stderr, "    cand stage %d source %d support %zu overlap %.3f rmse %.2f free %.3f explained %.3f occluded %.3f continued %.3f planarity %.3f nearest %.0f%% at %.3f %.3f %.3f\n",
+          std::fprintf(stderr, "    cand stage %d source %d support %zu overlap %.3f rmse %.2f free %.3f explained %.3f occluded %.3f continued %.3f planarity %.3f through %.3f nearest %.0f%% at %.3f %.3f %.3f\n",
                        int(c.stage), int(c.source), c.correspondences, c.overlap_fraction, c.rmse_m * 1e3, c.free_space_fraction, c.visible_explained,
-                       c.occluded_fraction, c.continued_fraction, c.support_planarity, 100 * nearest, c.T_scene_model.translation().x(),
+                       c.occluded_fraction, c.continued_fraction, c.support_planarity, c.through_fraction, 100 * nearest, c.T_scene_model.translation().x(),
                        c.T_scene_model.translation().y(), c.T_scene_model.translation().z());
         }
       // Each missed instance: the furthest stage a pose near it reached, and its figures.
@@ -541,6 +545,17 @@ int main(int argc, char** argv) {
                                                                              : "grouping",
                        rank_best, best->overlap_fraction, best->rmse_m * 1e3, best->free_space_fraction, best->visible_explained, best->occluded_fraction,
                        best->continued_fraction, best->correspondences);
+        // The true pose itself, as the recognizer's tests measure it, and refined by its fine ICP:
+        // whether the tests or the search lost the instance.
+        size_t model_index = 0;
+        while (library.model_name(model_index) != inst.model) ++model_index;
+        for (const bool refine : {false, true}) {
+          const auto c = check_pose(scene, library, model_index, inst.T_sensor_object, params, refine);
+          std::fprintf(stderr, "\n    at the true pose%s: %s overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f planarity %.3f through %.3f%s",
+                       refine ? ", refined" : "", c.stage == RecognitionCandidate::Stage::accepted ? "passes" : "refused", c.overlap_fraction,
+                       c.rmse_m * 1e3, c.free_space_fraction, c.visible_explained, c.occluded_fraction, c.continued_fraction, c.support_planarity, c.through_fraction,
+                       refine ? (" (" + std::to_string(symmetric_distance(md, inst.T_sensor_object, c.T_scene_model) * 100).substr(0, 4) + "% of the diameter off)").c_str() : "");
+        }
         std::fprintf(stderr, "\n");
       }
     }

@@ -116,6 +116,7 @@ class FreeSpace {
     double occluded = 0;    ///< share of the model surface a sensor should have seen that something in front hid
     double planarity = 0;   ///< largest eigenvalue of the mean outer product of the explained surface's normals (1: one plane)
     double continued = 0;   ///< share of the explained surface whose tangent plane the scene carries on beyond the model
+    double through = 0;     ///< share of the model on the less of the two sides of a solid's face it passes through
   };
   /// The model (its points at T) against what each view saw. A model point faces a view when its
   /// normal points at the sensor; it should have been seen when it faces the view and nothing of
@@ -139,13 +140,35 @@ class FreeSpace {
   template <typename WorthIt>
   Check check(const PointCloud& model, const Transform& T, const WorthIt& worth_it) const {
     Check c;
-    if (maps_.empty()) return c;
     std::vector<Eigen::Vector3d> p(model.points.size()), n(model.points.size());
 #pragma omp parallel for schedule(static)
     for (size_t i = 0; i < p.size(); ++i) {
       p[i] = T * model.points[i].cast<double>();
       n[i] = T.linear() * model.normals[i].cast<double>();
     }
+    // Through a solid's face: model points more than the tolerance in front of it and behind it,
+    // both over its region. A part stands on a table; a pose whose tee branch or valve stem goes
+    // down through the table top (the rest of it on a pipe lying there) cannot be, though the
+    // table hides what lies under it.
+    if (!solids_.empty() && !p.empty()) {
+      Eigen::Vector3d low = p[0], high = p[0];
+      for (const auto& q : p) low = low.cwiseMin(q), high = high.cwiseMax(q);
+      const double reach = (high - low).norm();
+      for (const auto& solid : solids_) {
+        // Most poses lie wholly on one side: the region is looked at only for those that do not.
+        const auto beyond = [&](double sign) {
+          return std::any_of(p.begin(), p.end(), [&](const Eigen::Vector3d& q) { return sign * (solid.normal.dot(q) - solid.offset) > tolerance_; });
+        };
+        if (!beyond(1) || !beyond(-1)) continue;
+        size_t front = 0, behind = 0;
+        for (const auto& q : p) {
+          const double d = solid.normal.dot(q) - solid.offset;
+          if (std::abs(d) > tolerance_ && under(solid, q, reach)) ++(d > 0 ? front : behind);
+        }
+        c.through = std::max(c.through, static_cast<double>(std::min(front, behind)) / static_cast<double>(p.size()));
+      }
+    }
+    if (maps_.empty()) return c;
     // 0: not known yet; 1: explained by the scene; 2: not (nothing near, or only a background plane).
     std::vector<char> near(p.size(), 0);
     const auto near_scene = [&](size_t i) {
@@ -290,8 +313,83 @@ class FreeSpace {
         if (component.size() > smallest_support)
           for (const size_t i : component) support_[i] = 1;
       }
+      std::vector<size_t> face;
+      for (size_t i = 0; i < n; ++i)
+        if (on[i] && support_[i]) face.push_back(i);
+      if (!face.empty()) solids_.push_back(Solid(scene_, face, best.normal, best.offset));
     }
   }
+
+  /// The face of a solid the scene lies on over a large region (a background or a support plane:
+  /// a table top, the floor): its plane, its normal toward the side the sensors saw (its points'
+  /// normals), and its region, the convex hull of its points in the plane (a table top is
+  /// convex; what stands on it and hides it, at its edges too, makes no hole).
+  struct Solid {
+    Eigen::Vector3d normal, u, v;
+    double offset = 0;
+    std::vector<Eigen::Vector2d> hull;  ///< counter-clockwise
+    Solid(const PointCloud& scene, const std::vector<size_t>& face, const Eigen::Vector3f& plane_normal, float plane_offset)
+        : normal(plane_normal.cast<double>()), offset(plane_offset) {
+      double facing = 0;
+      for (const size_t i : face) facing += scene.normals[i].cast<double>().dot(normal);
+      if (facing < 0) normal = -normal, offset = -offset;
+      u = normal.unitOrthogonal();
+      v = normal.cross(u);
+      std::vector<Eigen::Vector2d> q;
+      for (const size_t i : face) q.push_back(in_plane(scene.points[i].cast<double>()));
+      // Andrew's monotone chain.
+      std::sort(q.begin(), q.end(), [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y()); });
+      const auto turn = [](const Eigen::Vector2d& o, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+        return (a - o).x() * (b - o).y() - (a - o).y() * (b - o).x();
+      };
+      std::vector<Eigen::Vector2d> h(2 * q.size());
+      size_t k = 0;
+      for (size_t i = 0; i < q.size(); ++i) {
+        while (k >= 2 && turn(h[k - 2], h[k - 1], q[i]) <= 0) --k;
+        h[k++] = q[i];
+      }
+      for (size_t i = q.size() - 1, lower = k + 1; i-- > 0;) {
+        while (k >= lower && turn(h[k - 2], h[k - 1], q[i]) <= 0) --k;
+        h[k++] = q[i];
+      }
+      h.resize(k > 1 ? k - 1 : k);
+      hull = std::move(h);
+    }
+    Eigen::Vector2d in_plane(const Eigen::Vector3d& p) const { return {u.dot(p), v.dot(p)}; }
+    /// How far the point's foot on the plane lies outside the face's region [m] (at most 0: inside).
+    double outside(const Eigen::Vector3d& p) const {
+      if (hull.size() < 3) return std::numeric_limits<double>::infinity();
+      const Eigen::Vector2d q = in_plane(p);
+      double out = -std::numeric_limits<double>::infinity();
+      for (size_t i = 0; i < hull.size(); ++i) {
+        const Eigen::Vector2d edge = (hull[(i + 1) % hull.size()] - hull[i]).normalized();
+        const Eigen::Vector2d r = q - hull[i];
+        out = std::max(out, r.y() * edge.x() * -1 + r.x() * edge.y());
+      }
+      return out;
+    }
+  };
+  /// Whether a point lies over or under a solid's face: its foot on the face's plane in the face's
+  /// seen region, or up to `reach` beyond it where the sensors saw something in front of the
+  /// plane (the face carries on under what hides it - the parts on a table, the table's rims),
+  /// and not past it (beyond a table's edge the sensor sees the floor).
+  bool under(const Solid& solid, const Eigen::Vector3d& q, double reach) const {
+    const double outside = solid.outside(q);
+    if (outside <= 0) return true;
+    if (outside > reach) return false;
+    const Eigen::Vector3d foot = q - (solid.normal.dot(q) - solid.offset) * solid.normal;
+    bool hidden = false;
+    for (const auto& m : maps_) {
+      const auto k = m.key(foot);
+      if (!k) continue;
+      const double seen = m.seen_at(*k);
+      if (!std::isfinite(seen)) continue;
+      if (seen > k->depth + tolerance_) return false;
+      hidden = true;
+    }
+    return hidden;
+  }
+
 
  private:
   struct Key {
@@ -342,6 +440,7 @@ class FreeSpace {
   double grazing_cos_;
   std::vector<char> background_;  ///< per scene point: on a background plane
   std::vector<char> support_;     ///< per scene point: on a background or a support plane
+  std::vector<Solid> solids_;     ///< the faces of the background and support planes
   std::vector<Map> maps_;
 };
 
@@ -612,6 +711,65 @@ detail::TurnAxes find_turn_axes(const PointCloud& model) {
 // RMSE in resolutions.
 double coarse_score(const IcpResult& r, double res) { return r.overlap_fraction - 0.5 * r.rmse_m / res; }
 
+// The tests a pose must pass, each loosened by a slack (none: `passes`).
+struct Slack {
+  double overlap = 1;     ///< share of the required overlap
+  bool rmse = true;       ///< whether the residual is tested
+  double free_space = 1;  ///< times the free-space limit
+  double explained = 0;   ///< below the explained-surface limit
+  double planarity = 0;   ///< above the planarity limit
+  double continued = 1;   ///< times the continued-surface limit
+};
+// What something hid is not held against the overlap either; but what is seen must be more
+// than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
+bool meets_tests(const IcpResult& icp, const FreeSpace::Check& seen, const RecognitionParams& params, double res, const Slack& slack) {
+  const double required_overlap = std::max(params.min_model_overlap * (1 - seen.occluded), params.min_overlap_floor);
+  return icp.overlap_fraction >= slack.overlap * required_overlap && (!slack.rmse || icp.rmse_m <= params.max_rmse_factor * res) &&
+         seen.free_space <= slack.free_space * params.max_free_space_fraction && seen.explained >= params.min_visible_explained - slack.explained &&
+         seen.planarity <= params.max_support_planarity + slack.planarity && seen.continued <= slack.continued * params.max_continued_fraction &&
+         seen.through <= params.max_through_fraction;
+}
+
+void check_inputs(const TriangleMesh& scene, const SpinImageLibrary& library, const RecognitionParams& params) {
+  if (scene.faces.empty()) throw Error("recognition: the scene mesh has no faces");
+  if (library.model_count() == 0) throw Error("recognition: the model library is empty");
+  if (!(params.axis_step_factor > 0)) throw Error("recognition: axis_step_factor " + std::to_string(params.axis_step_factor) + " must be positive");
+  if (!(params.max_incidence_deg > 0 && params.max_incidence_deg <= 90))
+    throw Error("recognition: max_incidence_deg " + std::to_string(params.max_incidence_deg) + " must lie in (0, 90]");
+  if (!(params.own_bin_min_incidence_deg > 0 && params.own_bin_min_incidence_deg <= 90))
+    throw Error("recognition: own_bin_min_incidence_deg " + std::to_string(params.own_bin_min_incidence_deg) + " must lie in (0, 90]");
+}
+
+// The scene's points against the views that saw them (its background and support planes too).
+FreeSpace scene_free_space(const PointCloud& scene_points, const KdTree3& scene_tree, const SpinImageLibrary& library, const RecognitionParams& params) {
+  const double res = library.params().resolution_m;
+  size_t largest_model = 0, largest_planar_part = 0;
+  for (size_t m = 0; m < library.model_count(); ++m) {
+    largest_model = std::max(largest_model, library.model_points(m).points.size());
+    largest_planar_part = std::max(largest_planar_part, library.planar_points(m));
+  }
+  // Support planes are looked for only when they are used (else only the background planes).
+  const size_t smallest_support = params.no_votes_on_support ? 2 * largest_planar_part : 0;
+  return FreeSpace(scene_points, scene_tree, params.views, res, params.free_space_tolerance_factor * res, params.max_incidence_deg * std::numbers::pi / 180,
+                   largest_model, smallest_support, params.free_space_own_bin, params.own_bin_min_incidence_deg * std::numbers::pi / 180);
+}
+
+// The coarse ICP ranks starting poses, the fine one places and measures the few verified; on
+// the clutter bench halving their samples (from 1500 and 4000) found the same instances
+// (55 against 54 in 16 scenes) in two thirds of the time.
+IcpSettings coarse_icp(double res) {
+  IcpSettings coarse = detail::verification_icp(res, 15);
+  coarse.max_source_points = 750;
+  return coarse;
+}
+IcpSettings fine_icp(double res) {
+  IcpSettings fine = coarse_icp(res);
+  fine.max_iterations = 40;
+  fine.max_correspondence_distance_m = 1.0 * res;
+  fine.max_source_points = 2000;
+  return fine;
+}
+
 // A pose moved from another (turned about an axis, slid along one), refined and checked.
 struct Moved {
   IcpResult icp;
@@ -846,13 +1004,7 @@ Eigen::MatrixXf SpinImageLibrary::project(const Eigen::MatrixXf& images) const {
 }
 
 RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library, const RecognitionParams& params) {
-  if (scene.faces.empty()) throw Error("recognition: the scene mesh has no faces");
-  if (library.model_count() == 0) throw Error("recognition: the model library is empty");
-  if (!(params.axis_step_factor > 0)) throw Error("recognition: axis_step_factor " + std::to_string(params.axis_step_factor) + " must be positive");
-  if (!(params.max_incidence_deg > 0 && params.max_incidence_deg <= 90))
-    throw Error("recognition: max_incidence_deg " + std::to_string(params.max_incidence_deg) + " must lie in (0, 90]");
-  if (!(params.own_bin_min_incidence_deg > 0 && params.own_bin_min_incidence_deg <= 90))
-    throw Error("recognition: own_bin_min_incidence_deg " + std::to_string(params.own_bin_min_incidence_deg) + " must lie in (0, 90]");
+  check_inputs(scene, library, params);
   library.compress();
   RecognitionResult result;
   const double res = library.params().resolution_m;
@@ -907,29 +1059,12 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // "found" on a pipe explains less of it than the pipe does, so the pipe is accepted first, and
   // the tee's hypotheses there lose their support to it.
   t0 = Clock::now();
-  size_t largest_model = 0, largest_planar_part = 0;
-  for (size_t m = 0; m < library.model_count(); ++m) {
-    largest_model = std::max(largest_model, library.model_points(m).points.size());
-    largest_planar_part = std::max(largest_planar_part, library.planar_points(m));
-  }
-  // Support planes are looked for only when they are used (else only the background planes).
-  const size_t smallest_support = params.no_votes_on_support ? 2 * largest_planar_part : 0;
-  const FreeSpace free_space(scene_points, scene_tree, params.views, res, params.free_space_tolerance_factor * res,
-                             params.max_incidence_deg * std::numbers::pi / 180, largest_model, smallest_support, params.free_space_own_bin,
-                             params.own_bin_min_incidence_deg * std::numbers::pi / 180);
+  const FreeSpace free_space = scene_free_space(scene_points, scene_tree, library, params);
   // Scene points that do not vote (neither as reference points nor as partners): those on a
   // background plane, and with no_votes_on_support on a support plane too, whose pairs fit any
   // planar part of a model anywhere on them.
   const std::vector<char>& no_votes = params.no_votes_on_support ? free_space.support() : free_space.background();
-  // The coarse ICP ranks starting poses, the fine one places and measures the few verified; on
-  // the clutter bench halving their samples (from 1500 and 4000) found the same instances
-  // (55 against 54 in 16 scenes) in two thirds of the time.
-  IcpSettings coarse = detail::verification_icp(res, 15);
-  coarse.max_source_points = 750;
-  IcpSettings fine = coarse;
-  fine.max_iterations = 40;
-  fine.max_correspondence_distance_m = 1.0 * res;
-  fine.max_source_points = 2000;
+  const IcpSettings coarse = coarse_icp(res), fine = fine_icp(res);
   detail::GroupingParams grouping;
   grouping.similarity_ratio = 0.0;  // the correlation threshold already filtered
   grouping.geometric_consistency = params.geometric_consistency;
@@ -963,23 +1098,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     const auto taken = std::count_if(on.begin(), on.end(), [&](size_t s) { return explained[s]; });
     return static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on.size());
   };
-  // What something hid is not held against the overlap either; but what is seen must be more
-  // than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
-  const auto required_overlap = [&](const FreeSpace::Check& seen) { return std::max(params.min_model_overlap * (1 - seen.occluded), params.min_overlap_floor); };
-  // The tests a pose must pass, each loosened by a slack (none: `passes`).
-  struct Slack {
-    double overlap = 1;     ///< share of the required overlap
-    bool rmse = true;       ///< whether the residual is tested
-    double free_space = 1;  ///< times the free-space limit
-    double explained = 0;   ///< below the explained-surface limit
-    double planarity = 0;   ///< above the planarity limit
-    double continued = 1;   ///< times the continued-surface limit
-  };
-  const auto meets = [&](const IcpResult& icp, const FreeSpace::Check& seen, const Slack& slack) {
-    return icp.overlap_fraction >= slack.overlap * required_overlap(seen) && (!slack.rmse || icp.rmse_m <= params.max_rmse_factor * res) &&
-           seen.free_space <= slack.free_space * params.max_free_space_fraction && seen.explained >= params.min_visible_explained - slack.explained &&
-           seen.planarity <= params.max_support_planarity + slack.planarity && seen.continued <= slack.continued * params.max_continued_fraction;
-  };
+  const auto meets = [&](const IcpResult& icp, const FreeSpace::Check& seen, const Slack& slack) { return meets_tests(icp, seen, params, res, slack); };
   const auto passes = [&](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(icp, seen, {}); };
   // A coarse pose far from passing is refused without the fine ICP, which moves a pose by a
   // fraction of a resolution (on the clutter bench's first 12 scenes this screen let through all
@@ -1202,6 +1321,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         c.occluded_fraction = v.seen->occluded;
         c.continued_fraction = v.seen->continued;
         c.support_planarity = v.seen->planarity;
+        c.through_fraction = v.seen->through;
       }
       c.source = v.origin->source;
       c.stage = accepted && s.winner == k ? RecognitionCandidate::Stage::accepted
@@ -1330,6 +1450,39 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   }
   result.seconds_verify = since(t0);
   return result;
+}
+
+RecognitionCandidate check_pose(const TriangleMesh& scene, SpinImageLibrary& library, size_t model_index, const Transform& T_scene_model,
+                                const RecognitionParams& params, bool refine) {
+  check_inputs(scene, library, params);
+  if (model_index >= library.model_count())
+    throw Error("recognition: model index " + std::to_string(model_index) + " out of range (the library has " + std::to_string(library.model_count()) +
+                " models)");
+  if (!T_scene_model.matrix().allFinite()) throw Error("recognition: the pose to check is not finite");
+  library.compress();
+  const double res = library.params().resolution_m;
+  const PointCloud scene_points = sample_surface(scene, res);
+  const KdTree3 scene_tree(scene_points.points);
+  const FreeSpace free_space = scene_free_space(scene_points, scene_tree, library, params);
+  const PointCloud& model = library.model_points(model_index);
+  IcpSettings settings = fine_icp(res);
+  if (!refine) settings.max_iterations = 1;  // its figures are those of the pose it starts from
+  IcpResult icp = icp_point_to_plane(model, scene_points, scene_tree, T_scene_model, settings);
+  if (!refine) icp.T_target_source = T_scene_model;
+  const FreeSpace::Check seen = free_space.check(model, icp.T_target_source);
+  RecognitionCandidate c;
+  c.model_index = model_index;
+  c.T_scene_model = icp.T_target_source;
+  c.overlap_fraction = icp.overlap_fraction;
+  c.rmse_m = icp.rmse_m;
+  c.free_space_fraction = seen.free_space;
+  c.visible_explained = seen.explained;
+  c.occluded_fraction = seen.occluded;
+  c.continued_fraction = seen.continued;
+  c.support_planarity = seen.planarity;
+  c.through_fraction = seen.through;
+  c.stage = meets_tests(icp, seen, params, res, {}) ? RecognitionCandidate::Stage::accepted : RecognitionCandidate::Stage::refused;
+  return c;
 }
 
 }  // namespace artisan

@@ -235,8 +235,9 @@ TEST(Recognition, PointPairVotingFindsPipework) {
 // z = 20 mm) and a plane around it, seen from above at an angle. On a table (the plane at z = 0)
 // the flange is found at its pose; sunk up to its face in a larger surface (the plane at z = 20
 // mm: the scene carries its face on past its outline, as when a flange is "found" flush on a
-// box's face) it is no instance - unless the silhouette test is turned off, which shows the
-// pose is otherwise accepted.
+// box's face) it is no instance - nor at its pose with the silhouette test turned off, as it
+// then goes through the plane's face - unless the through test is turned off too, which shows
+// the pose is otherwise accepted.
 TEST(Recognition, AFaceFlushWithALargerSurfaceHasNoSilhouetteAndIsNoInstance) {
   const auto path = test::data_dir() / "workcells" / "models" / "flange.ply";
   const auto flange = io::ply_to_mesh(io::read_ply(path), path);
@@ -282,7 +283,11 @@ TEST(Recognition, AFaceFlushWithALargerSurfaceHasNoSilhouetteAndIsNoInstance) {
   EXPECT_EQ(found_at_pose(flush, params).first, 0u) << "the flange sunk up to its face";
   RecognitionParams no_silhouette = params;
   no_silhouette.max_continued_fraction = 1.0;
-  EXPECT_EQ(found_at_pose(flush, no_silhouette).second, 1) << "without the silhouette test";
+  // Sunk 20 mm at its pose, its hub above the plane and its disc under it, it also goes through
+  // the plane's face (max_through_fraction): refused at its pose by that alone.
+  EXPECT_EQ(found_at_pose(flush, no_silhouette).second, 0) << "without the silhouette test, through the plane";
+  no_silhouette.max_through_fraction = 1.0;
+  EXPECT_EQ(found_at_pose(flush, no_silhouette).second, 1) << "without the silhouette and through tests";
 }
 
 TEST(Recognition, BadInputThrows) {
@@ -614,7 +619,8 @@ TEST(Recognition, TheTableTopNeedNotVote) {
 // grazing incidence: the scanner returns nothing there (the simulated Vivid drops points from
 // 60 degrees and all of them from 80), so "the sensor saw through it" is no evidence.
 // Method: bench_recognition's scene 21 (data/recognition/clutter-scene21), whose flange#2 is
-// unoccluded (2% in the laser's shadow) but seen edge-on (its faces at about 88 degrees to the rays), recognized with the
+// unoccluded (2% in the laser's shadow) but seen edge-on (its faces at about 88 degrees to the
+// rays: the ground truth counts 25% of it as hidden, beyond the scanner's 80-degree limit), recognized with the
 // five-part library without an incidence limit (the default) and with one of 70 degrees
 // (RecognitionParams::max_incidence_deg). Without it the flange must be missed (its true pose
 // leaves a tenth of its sensor-facing surface "in free space"; the test fails if it is found,
@@ -622,7 +628,7 @@ TEST(Recognition, TheTableTopNeedNotVote) {
 // (MSSD within 10% of the diameter), and every instance must be a true one.
 // Both tests below hold each other's change off: either finds the flange.
 TEST(Recognition, ASurfaceAtGrazingIncidenceIsNoEvidenceAgainstAPose) {
-  ASSERT_GT(kept_scene("clutter-scene21").object("flange#2")->visible_fraction, 0.95);
+  ASSERT_GT(kept_scene("clutter-scene21").object("flange#2")->visible_fraction, 0.7);
   RecognitionParams without;
   without.free_space_own_bin = false;
   RecognitionParams with = without;
@@ -667,14 +673,15 @@ TEST(Recognition, ASearchWithoutAnInstanceTriesTheNextStartingPoses) {
 // pose refined a few millimetres short of the seen end leaves the scene's pipe carrying on past
 // the model's outline and is refused by the continued-surface test. Such a pose, refused by a
 // small margin, is now also tried slid along the axis. Method: bench_recognition's scene 44
-// (data/recognition/clutter-scene44), whose pipe_350#1 is unoccluded (3% in the laser's shadow), recognized with the
+// (data/recognition/clutter-scene44), whose pipe_350#1 is unoccluded (3% in the laser's shadow,
+// 5% at grazing incidence beyond the scanner's limit), recognized with the
 // five-part library as the bench does, without slides (RecognitionParams::axis_slide_steps 0)
 // and with them. Without them the pipe must be missed (refused with 3.3% of its surface
 // continued against the 3% limit; the test fails if it is found, as the scene would no longer
 // test the slides); with them it must be found at its pose (MSSD within 10% of the diameter),
 // and every instance must be a true one.
 TEST(Recognition, APipeRefusedShortOfItsEndIsSlidAlongItsAxis) {
-  ASSERT_GT(kept_scene("clutter-scene44").object("pipe_350#1")->visible_fraction, 0.95);
+  ASSERT_GT(kept_scene("clutter-scene44").object("pipe_350#1")->visible_fraction, 0.9);
   // The slides alone, in the pool they were needed in: with the support plane's votes left out
   // (the default) the pipe is found without them, rivals or not.
   RecognitionParams with;
@@ -699,6 +706,56 @@ TEST(Recognition, ARivalThatFitsBetterTakesTheWinnersPlace) {
   RecognitionParams without;
   without.rivals = 0;
   expect_found_only_with("clutter-scene44", "pipe_350#2", {"pipe_350#1", "pipe_350#2"}, "rivals", without, {});
+}
+
+// check_pose measures a given pose as recognize measures the poses it verifies. Method: the
+// kept scene 38, its flange#3 (6% occluded): at its true pose it must pass (refined, within 1 mm
+// of it); moved 3 cm toward the sensor, in space the sensor saw through, it must be refused with
+// more than the free-space limit of its surface there; a model index beyond the library, and a
+// pose that is not finite, must throw.
+TEST(Recognition, CheckPoseMeasuresAGivenPose) {
+  const auto kept = kept_scene("clutter-scene38");
+  const auto& flange = *kept.object("flange#3");
+  SpinImageLibrary library;
+  for (const auto& name : kBenchLibrary) library.add_model(name, library_model(name).mesh);
+  const size_t index = std::find(kBenchLibrary.begin(), kBenchLibrary.end(), "flange") - kBenchLibrary.begin();
+  RecognitionParams params;
+  params.views = {SensorView::perspective(Eigen::Vector3d::Zero())};
+  const auto at_truth = check_pose(kept.mesh, library, index, flange.T_sensor_object, params);
+  std::printf("at the true pose: overlap %.3f, free space %.3f, explained %.3f, through %.3f, moved %.2f mm\n", at_truth.overlap_fraction,
+              at_truth.free_space_fraction, at_truth.visible_explained, at_truth.through_fraction,
+              1e3 * (at_truth.T_scene_model.translation() - flange.T_sensor_object.translation()).norm());
+  EXPECT_EQ(at_truth.stage, RecognitionCandidate::Stage::accepted);
+  EXPECT_LT((at_truth.T_scene_model.translation() - flange.T_sensor_object.translation()).norm(), 0.001);
+  Transform nearer = flange.T_sensor_object;
+  nearer.translation() -= 0.03 * flange.T_sensor_object.translation().normalized();
+  const auto in_front = check_pose(kept.mesh, library, index, nearer, params, false);
+  std::printf("3 cm nearer: overlap %.3f, free space %.3f\n", in_front.overlap_fraction, in_front.free_space_fraction);
+  EXPECT_EQ(in_front.stage, RecognitionCandidate::Stage::refused);
+  EXPECT_GT(in_front.free_space_fraction, params.max_free_space_fraction);
+  EXPECT_THROW(check_pose(kept.mesh, library, kBenchLibrary.size(), flange.T_sensor_object, params), Error);
+  Transform broken = flange.T_sensor_object;
+  broken.translation().x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(check_pose(kept.mesh, library, index, broken, params), Error);
+}
+
+// A part stands on the table; it does not go through it. A tee whose run lies on a pipe lying on
+// the table, its branch down in the table top, fits the scene: the table hides where its branch
+// would be, so nothing the sensor saw contradicts it, and as it explains more of the scene than
+// the pipe does it is accepted first and the pipe is lost. Such a pose now leaves a share of the
+// model on each side of a solid's face (a background or support plane; its region the convex
+// hull of its seen points, and beyond it under what hides the plane) and is refused
+// (RecognitionParams::max_through_fraction). Method: bench_recognition's scene 38
+// (data/recognition/clutter-scene38: three flanges, a pipe and an elbow with distractors),
+// whose pipe_350#1 is 42% occluded, recognized with the five-part library as the bench does,
+// without the test (a limit of 1) and with it. Without it the pipe must be missed (a false tee
+// 73 mm along it, its lowest point 30 mm under the table top; the test fails if the pipe is
+// found, as the scene would no longer test the change); with it the pipe must be found at its
+// pose (MSSD within 10% of the diameter), and every instance must be a true one.
+TEST(Recognition, APoseThroughTheTableTopIsNoInstance) {
+  RecognitionParams without;
+  without.max_through_fraction = 1;
+  expect_found_only_with("clutter-scene38", "pipe_350#1", {"pipe_350#1", "flange#3"}, "the through test", without, {});
 }
 }  // namespace
 }  // namespace artisan
