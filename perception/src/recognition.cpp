@@ -730,6 +730,24 @@ bool meets_tests(const IcpResult& icp, const FreeSpace::Check& seen, const Recog
          seen.through <= params.max_through_fraction;
 }
 
+// A pose's figures as a tried pose (diagnosis); `seen` null where it was not checked.
+RecognitionCandidate candidate_of(size_t model_index, const Transform& T_scene_model, const IcpResult& icp, const FreeSpace::Check* seen) {
+  RecognitionCandidate c;
+  c.model_index = model_index;
+  c.T_scene_model = T_scene_model;
+  c.overlap_fraction = icp.overlap_fraction;
+  c.rmse_m = icp.rmse_m;
+  if (seen) {
+    c.free_space_fraction = seen->free_space;
+    c.visible_explained = seen->explained;
+    c.occluded_fraction = seen->occluded;
+    c.continued_fraction = seen->continued;
+    c.support_planarity = seen->planarity;
+    c.through_fraction = seen->through;
+  }
+  return c;
+}
+
 void check_inputs(const TriangleMesh& scene, const SpinImageLibrary& library, const RecognitionParams& params) {
   if (scene.faces.empty()) throw Error("recognition: the scene mesh has no faces");
   if (library.model_count() == 0) throw Error("recognition: the model library is empty");
@@ -1309,20 +1327,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     if (!params.keep_candidates) return;
     for (size_t k = 0; k < s.verified.size(); ++k) {
       const auto& v = s.verified[k];
-      RecognitionCandidate c;
-      c.model_index = s.m;
-      c.T_scene_model = v.T;
-      c.overlap_fraction = v.icp.overlap_fraction;
-      c.rmse_m = v.icp.rmse_m;
+      RecognitionCandidate c = candidate_of(s.m, v.T, v.icp, v.seen ? &*v.seen : nullptr);
       c.correspondences = v.size;
-      if (v.seen) {
-        c.free_space_fraction = v.seen->free_space;
-        c.visible_explained = v.seen->explained;
-        c.occluded_fraction = v.seen->occluded;
-        c.continued_fraction = v.seen->continued;
-        c.support_planarity = v.seen->planarity;
-        c.through_fraction = v.seen->through;
-      }
       c.source = v.origin->source;
       c.stage = accepted && s.winner == k ? RecognitionCandidate::Stage::accepted
                 : v.seen                   ? RecognitionCandidate::Stage::refused
@@ -1470,17 +1476,7 @@ RecognitionCandidate check_pose(const TriangleMesh& scene, SpinImageLibrary& lib
   IcpResult icp = icp_point_to_plane(model, scene_points, scene_tree, T_scene_model, settings);
   if (!refine) icp.T_target_source = T_scene_model;
   const FreeSpace::Check seen = free_space.check(model, icp.T_target_source);
-  RecognitionCandidate c;
-  c.model_index = model_index;
-  c.T_scene_model = icp.T_target_source;
-  c.overlap_fraction = icp.overlap_fraction;
-  c.rmse_m = icp.rmse_m;
-  c.free_space_fraction = seen.free_space;
-  c.visible_explained = seen.explained;
-  c.occluded_fraction = seen.occluded;
-  c.continued_fraction = seen.continued;
-  c.support_planarity = seen.planarity;
-  c.through_fraction = seen.through;
+  RecognitionCandidate c = candidate_of(model_index, icp.T_target_source, icp, &seen);
   c.stage = meets_tests(icp, seen, params, res, {}) ? RecognitionCandidate::Stage::accepted : RecognitionCandidate::Stage::refused;
   return c;
 }

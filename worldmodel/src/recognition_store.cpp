@@ -150,7 +150,14 @@ std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id,
                            {"own_bin_min_incidence_deg", params.own_bin_min_incidence_deg},
                            {"search_rounds", params.search_rounds},
                            {"max_incidence_deg", params.max_incidence_deg},
-                           {"min_visible_explained", params.min_visible_explained}};
+                           {"min_visible_explained", params.min_visible_explained},
+                           {"max_support_planarity", params.max_support_planarity},
+                           {"max_continued_fraction", params.max_continued_fraction},
+                           {"max_through_fraction", params.max_through_fraction},
+                           {"no_votes_on_support", params.no_votes_on_support},
+                           {"turn_steps", params.turn_steps},
+                           {"rivals", params.rivals},
+                           {"rival_margin", params.rival_margin}};
   std::vector<RecognizedObject> out;
   ws.write([&] {
     std::map<std::string, int> count;
