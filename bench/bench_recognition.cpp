@@ -307,6 +307,7 @@ int main(int argc, char** argv) {
       else if (k == "max_rmse_factor") tuned.max_rmse_factor = v;
       else if (k == "pair_step_fraction") library_params.pair_step_fraction = v;
       else if (k == "pair_max_cell_share") library_params.pair_max_cell_share = v;
+      else if (k == "pair_reference_stride") library_params.pair_reference_stride = int(v);
       else if (k == "coarse_refined") tuned.coarse_refined = int(v);
       else if (k == "max_instances") tuned.max_instances = int(v);
       else if (k == "max_continued_fraction") tuned.max_continued_fraction = v;

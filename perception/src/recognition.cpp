@@ -958,6 +958,7 @@ void SpinImageLibrary::compress() {
     if (m.pairs) continue;
     detail::PairVotingParams voting;
     voting.max_cell_share = params_.pair_max_cell_share;
+    voting.reference_stride = params_.pair_reference_stride;
     voting.step_m = std::max(params_.pair_min_step_factor * params_.resolution_m,
                              params_.pair_step_fraction * static_cast<double>(m.points.bounds().diagonal().norm()));
     m.pairs = std::make_shared<const detail::PairFeatureModel>(m.points, voting);
