@@ -75,11 +75,10 @@ Acquisition scan_pioneer(Renderer& renderer, const Workcell& cell, const Transfo
   colour_and_truth.near_m = near_m;
   colour_and_truth.far_m = far_m;
   const RenderResult left = renderer.render(cell, cam, T_world_sensor, colour_and_truth);
-  RenderOptions colour_only = colour_and_truth;
-  colour_only.depth = false;
-  colour_only.instances = false;
-  const RenderResult right = renderer.render(cell, cam, T_world_sensor * T_sensor_right, colour_only);
-  const RenderResult top = renderer.render(cell, cam, T_world_sensor * T_sensor_top, colour_only);
+  RenderOptions colour_and_depth = colour_and_truth;
+  colour_and_depth.instances = false;
+  const RenderResult right = renderer.render(cell, cam, T_world_sensor * T_sensor_right, colour_and_depth);
+  const RenderResult top = renderer.render(cell, cam, T_world_sensor * T_sensor_top, colour_and_depth);
 
   Rng rng(seed);
   const cv::Mat gl = grey_with_noise(left.color, p.image_noise_sigma, rng);
@@ -131,7 +130,37 @@ Acquisition scan_pioneer(Renderer& renderer, const Workcell& cell, const Transfo
   add_image("right", right.color, T_sensor_right);
   add_image("top", top.color, T_sensor_top);
 
-  acq.truth = view_truth(renderer, cell, r.sensor.kind, seed, cam, T_world_sensor, left.instance_ids, left.depth_m, near_m, far_m);
+  // What the head can measure at all: a left pixel in range whose point the right or the top
+  // camera sees too (a stereo pair measures only what both its cameras see; the head fuses the
+  // two pairs and keeps either alone). A surface only the left camera sees - in a slot, behind
+  // an edge from the others - is not visible, however plainly the left image shows it.
+  const auto seen_from = [&](const RenderResult& other, const Transform& T_sensor_other, const Eigen::Vector3d& p_sensor) {
+    const Eigen::Vector3d q = T_sensor_other.inverse() * p_sensor;
+    if (!(q.z() > 0)) return false;
+    const double u = cam.fx * q.x() / q.z() + cam.cx, v = cam.fy * q.y() / q.z() + cam.cy;
+    const int iu = static_cast<int>(std::floor(u)), iv = static_cast<int>(std::floor(v));
+    float farthest = 0.f;  // of the 2 x 2 pixels around it: lenient on slopes
+    bool inside = false;
+    for (int dv = 0; dv <= 1; ++dv)
+      for (int du = 0; du <= 1; ++du) {
+        const int uu = iu + du, vv = iv + dv;
+        if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
+        inside = true;
+        const float d = other.depth_m[static_cast<size_t>(vv) * W + uu];
+        farthest = std::max(farthest, d > 0 ? d : 1e9f);
+      }
+    return inside && q.z() <= farthest + 0.003 + 0.002 * q.z();
+  };
+  std::vector<char> measurable(static_cast<size_t>(W) * H, 0);
+  for (int v = 0; v < H; ++v)
+    for (int u = 0; u < W; ++u) {
+      const size_t i = static_cast<size_t>(v) * W + u;
+      const float z = left.depth_m[i];
+      if (z <= 0 || z < p.min_range_m || z > p.max_range_m) continue;
+      const Eigen::Vector3d p_sensor = cam.unproject({u, v}, z);
+      measurable[i] = seen_from(right, T_sensor_right, p_sensor) || seen_from(top, T_sensor_top, p_sensor);
+    }
+  acq.truth = view_truth(renderer, cell, r.sensor.kind, seed, cam, T_world_sensor, left.instance_ids, left.depth_m, near_m, far_m, measurable);
   return acq;
 }
 

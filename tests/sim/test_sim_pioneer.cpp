@@ -20,6 +20,35 @@ using test::box_body;
 using test::cell_of;
 using test::wall_at;
 
+// Method: a plate 1.0 m in front of the head with a 2 cm square hole on the left camera's axis,
+// a wall at 1.5 m, and a 16 mm cube on the wall behind the hole. The left camera sees the cube
+// through the hole; the right and top cameras, 0.2 m away, look through the hole at the wall
+// 8-11 cm beside it, so neither pair can measure the cube: the ground truth must call it unseen
+// (visible fraction 0, though the left image shows it over 20 pixels). A cube in plain view
+// of all three cameras, in front of the plate, is visible (above 0.9).
+TEST(SimPioneer, WhatOnlyTheLeftCameraSeesIsNotVisible) {
+  const double h = 0.01;  // the hole's half-width
+  auto cell = cell_of({wall_at(1.5), box_body("plate_left", {0.5 - h, 1.0, 0.01}, at(-(0.5 + h) / 2, 0, 1.0)),
+                       box_body("plate_right", {0.5 - h, 1.0, 0.01}, at((0.5 + h) / 2, 0, 1.0)),
+                       box_body("plate_top", {2 * h, 0.5 - h, 0.01}, at(0, -(0.5 + h) / 2, 1.0)),
+                       box_body("plate_bottom", {2 * h, 0.5 - h, 0.01}, at(0, (0.5 + h) / 2, 1.0)),
+                       box_body("hidden", {0.016, 0.016, 0.016}, at(0, 0, 1.49)), box_body("plain", {0.06, 0.06, 0.06}, at(0.2, 0.1, 0.8))});
+  Renderer renderer(cell);
+  const auto acq = scan_pioneer(renderer, cell, Transform::Identity(), PioneerParams{}, 2);
+  const auto object = [&](const std::string& name) {
+    const auto it = std::find_if(acq.truth.objects.begin(), acq.truth.objects.end(), [&](const ObjectTruth& o) { return o.name == name; });
+    EXPECT_NE(it, acq.truth.objects.end()) << name;
+    return *it;
+  };
+  const auto hidden = object("hidden"), plain = object("plain");
+  const auto in_left = std::count(acq.truth.instance_ids.begin(), acq.truth.instance_ids.end(), static_cast<uint16_t>(hidden.instance_id));
+  std::printf("cube behind the hole: %ld left-camera pixels, visible fraction %.3f; cube in plain view %.3f\n", static_cast<long>(in_left),
+              hidden.visible_fraction, plain.visible_fraction);
+  EXPECT_GT(in_left, 20);
+  EXPECT_EQ(hidden.visible_pixels, 0);
+  EXPECT_GT(plain.visible_fraction, 0.9);
+}
+
 // Method: a textured wall at 2.0 m in front of the head, with a textured box 0.5 m nearer.
 // Range comes from SGBM on the rendered images, so it is compared with the noise-free render:
 // at least 75 % of the pixels must have data, the median depth error must be below 0.5 %

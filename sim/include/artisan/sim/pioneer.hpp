@@ -32,7 +32,8 @@ struct PioneerParams {
 PioneerParams pioneer_params(const std::map<std::string, double>& overrides);
 
 /// One Pioneer acquisition from the reference (left) camera at T_world_sensor.
-/// Deterministic for a given seed.
+/// Deterministic for a given seed. Its ground truth counts as visible only what the head can
+/// measure: a left-camera pixel in range whose point the right or the top camera sees too.
 Acquisition scan_pioneer(Renderer& renderer, const Workcell& cell, const Transform& T_world_sensor,
                          const PioneerParams& params, uint64_t seed);
 
