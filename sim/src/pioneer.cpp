@@ -136,20 +136,8 @@ Acquisition scan_pioneer(Renderer& renderer, const Workcell& cell, const Transfo
   // an edge from the others - is not visible, however plainly the left image shows it.
   const auto seen_from = [&](const RenderResult& other, const Transform& T_sensor_other, const Eigen::Vector3d& p_sensor) {
     const Eigen::Vector3d q = T_sensor_other.inverse() * p_sensor;
-    if (!(q.z() > 0)) return false;
-    const double u = cam.fx * q.x() / q.z() + cam.cx, v = cam.fy * q.y() / q.z() + cam.cy;
-    const int iu = static_cast<int>(std::floor(u)), iv = static_cast<int>(std::floor(v));
-    float farthest = 0.f;  // of the 2 x 2 pixels around it: lenient on slopes
-    bool inside = false;
-    for (int dv = 0; dv <= 1; ++dv)
-      for (int du = 0; du <= 1; ++du) {
-        const int uu = iu + du, vv = iv + dv;
-        if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
-        inside = true;
-        const float d = other.depth_m[static_cast<size_t>(vv) * W + uu];
-        farthest = std::max(farthest, d > 0 ? d : 1e9f);
-      }
-    return inside && q.z() <= farthest + 0.003 + 0.002 * q.z();
+    const auto farthest = farthest_depth_around(other, cam, q);
+    return farthest && q.z() <= *farthest + 0.003 + 0.002 * q.z();
   };
   std::vector<char> measurable(static_cast<size_t>(W) * H, 0);
   for (int v = 0; v < H; ++v)

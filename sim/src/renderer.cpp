@@ -355,4 +355,19 @@ std::vector<Eigen::Vector3f> unproject_depth(const PinholeCamera& camera, const 
   return points;
 }
 
+std::optional<float> farthest_depth_around(const RenderResult& render, const PinholeCamera& camera, const Eigen::Vector3d& p_camera) {
+  if (!(p_camera.z() > 0)) return std::nullopt;
+  const double u = camera.fx * p_camera.x() / p_camera.z() + camera.cx, v = camera.fy * p_camera.y() / p_camera.z() + camera.cy;
+  const int iu = static_cast<int>(std::floor(u)), iv = static_cast<int>(std::floor(v));
+  std::optional<float> farthest;
+  for (int dv = 0; dv <= 1; ++dv)
+    for (int du = 0; du <= 1; ++du) {
+      const int uu = iu + du, vv = iv + dv;
+      if (uu < 0 || vv < 0 || uu >= render.width || vv >= render.height) continue;
+      const float d = render.depth_m[static_cast<size_t>(vv) * render.width + uu];
+      farthest = std::max(farthest.value_or(0.f), d > 0 ? d : 1e9f);
+    }
+  return farthest;
+}
+
 }  // namespace artisan::sim

@@ -127,20 +127,8 @@ Acquisition scan_vivid(Renderer& renderer, const Workcell& cell, const Transform
       const Eigen::Vector3f& ps = points_true[i];
       // Shadowing: the laser must reach the point (the camera sees it by construction).
       const Eigen::Vector3d pl = ps.cast<double>() - emitter_sensor;
-      const Eigen::Vector2d q(laser_cam.fx * pl.x() / pl.z() + laser_cam.cx, laser_cam.fy * pl.y() / pl.z() + laser_cam.cy);
-      const int qu = static_cast<int>(std::floor(q.x())), qv = static_cast<int>(std::floor(q.y()));
-      float lit_depth = 0.f;  // farthest depth of the 2 x 2 texels around q: lenient on slopes
-      bool outside = true;
-      for (int dv = 0; dv <= 1; ++dv)
-        for (int du = 0; du <= 1; ++du) {
-          const int uu = qu + du, vv = qv + dv;
-          if (uu < 0 || vv < 0 || uu >= laser_cam.width || vv >= laser_cam.height) continue;
-          outside = false;
-          const float d = laser.depth_m[static_cast<size_t>(vv) * laser_cam.width + uu];
-          lit_depth = std::max(lit_depth, d > 0 ? d : 1e9f);
-        }
-      if (outside) continue;
-      if (pl.z() > lit_depth + p.shadow_tolerance_m + 0.002 * pl.z()) continue;
+      const auto lit_depth = farthest_depth_around(laser, laser_cam, pl);
+      if (!lit_depth || pl.z() > *lit_depth + p.shadow_tolerance_m + 0.002 * pl.z()) continue;
       // Grazing incidence, for the camera or the laser, whichever is worse. Beyond the limit the
       // scanner never returns anything: not measurable, like a shadow (a flange seen edge-on is
       // hidden from it however plainly the camera sees its face).

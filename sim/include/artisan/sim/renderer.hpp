@@ -9,6 +9,7 @@
 // the depth buffer's quantisation (24 bits: about z^2 / near * 6e-8 m).
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "artisan/core/camera.hpp"
@@ -35,6 +36,12 @@ struct RenderResult {
   ColorImage color;                    ///< RGB, rows top to bottom (empty unless requested)
   std::vector<uint16_t> instance_ids;  ///< Body::instance_id per pixel; 0 = nothing (empty unless requested)
 };
+
+/// The farthest depth a render (with depth) saw in the 2 x 2 pixels around where `p_camera`, a
+/// point in its camera's frame, projects - lenient on slopes; a pixel that saw nothing counts as
+/// infinitely far - or none when the point projects outside the image or lies behind the camera.
+/// Whether another camera (a scanner's laser, a stereo partner) sees a point: it lies no farther.
+std::optional<float> farthest_depth_around(const RenderResult& render, const PinholeCamera& camera, const Eigen::Vector3d& p_camera);
 
 class Renderer {
  public:
