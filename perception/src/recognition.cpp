@@ -156,10 +156,12 @@ class FreeSpace {
       const double reach = (high - low).norm();
       for (const auto& solid : solids_) {
         // Most poses lie wholly on one side: the region is looked at only for those that do not.
-        const auto beyond = [&](double sign) {
-          return std::any_of(p.begin(), p.end(), [&](const Eigen::Vector3d& q) { return sign * (solid.normal.dot(q) - solid.offset) > tolerance_; });
-        };
-        if (!beyond(1) || !beyond(-1)) continue;
+        double nearest = std::numeric_limits<double>::infinity(), farthest = -nearest;  // signed distances from the face
+        for (const auto& q : p) {
+          const double d = solid.normal.dot(q) - solid.offset;
+          nearest = std::min(nearest, d), farthest = std::max(farthest, d);
+        }
+        if (nearest >= -tolerance_ || farthest <= tolerance_) continue;
         size_t front = 0, behind = 0;
         for (const auto& q : p) {
           const double d = solid.normal.dot(q) - solid.offset;
@@ -364,7 +366,7 @@ class FreeSpace {
       for (size_t i = 0; i < hull.size(); ++i) {
         const Eigen::Vector2d edge = (hull[(i + 1) % hull.size()] - hull[i]).normalized();
         const Eigen::Vector2d r = q - hull[i];
-        out = std::max(out, r.y() * edge.x() * -1 + r.x() * edge.y());
+        out = std::max(out, edge.y() * r.x() - edge.x() * r.y());  // right of the edge: outside
       }
       return out;
     }
