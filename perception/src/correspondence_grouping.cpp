@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include <Eigen/Geometry>
 
@@ -11,14 +12,13 @@ namespace artisan::detail {
 
 namespace {
 
-// Relative disagreement of the spin-map coordinates of two correspondences (eq. 9), made
-// symmetric, and the grouping distance that discounts nearby pairs (eq. 10).
-struct Consistency {
-  float d_gc;
-  float w_gc;
-};
+// Whether two correspondences agree: their spin-map coordinates' relative disagreement (eq. 9),
+// made symmetric, below T_gc (kConsistent), and the grouping distance that discounts nearby
+// pairs (eq. 10) too (kGroupable). The grouping distance is never below the disagreement (its
+// denominator is at most 1), so only consistent pairs need it.
+constexpr uint8_t kConsistent = 1, kGroupable = 2;
 
-Consistency consistency(const PointCloud& src, const PointCloud& tgt, const Correspondence& a, const Correspondence& b, float gamma) {
+uint8_t agreement(const PointCloud& src, const PointCloud& tgt, const Correspondence& a, const Correspondence& b, float gamma, float t_gc) {
   const Eigen::Vector2f s_ab = spin_coordinates(src.points[a.source], src.normals[a.source], src.points[b.source]);
   const Eigen::Vector2f t_ab = spin_coordinates(tgt.points[a.target], tgt.normals[a.target], tgt.points[b.target]);
   const Eigen::Vector2f s_ba = spin_coordinates(src.points[b.source], src.normals[b.source], src.points[a.source]);
@@ -31,7 +31,8 @@ Consistency consistency(const PointCloud& src, const PointCloud& tgt, const Corr
     return dgc / (1.0f - std::exp(-0.5f * (s.norm() + t.norm()) / gamma) + 1e-9f);
   };
   const float d1 = d(s_ab, t_ab), d2 = d(s_ba, t_ba);
-  return {std::max(d1, d2), std::max(w(d1, s_ab, t_ab), w(d2, s_ba, t_ba))};
+  if (!(std::max(d1, d2) < t_gc)) return 0;
+  return std::max(w(d1, s_ab, t_ab), w(d2, s_ba, t_ba)) < t_gc ? kConsistent | kGroupable : kConsistent;
 }
 
 Transform transform_from(const PointCloud& src, const PointCloud& tgt, const std::vector<Correspondence>& group) {
@@ -61,14 +62,17 @@ GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tg
   // are a small minority, so a match is kept when it is consistent with enough others to form a
   // group, and seeds are tried in order of how many others agree with them.
   const size_t n = candidates.size();
-  const float gamma = static_cast<float>(params.gamma_m);
-  std::vector<Consistency> pair(n * n);
+  const float gamma = static_cast<float>(params.gamma_m), t_gc = static_cast<float>(params.geometric_consistency);
+  // Symmetric (the larger of the two directions' disagreements): each pair measured once.
+  std::vector<uint8_t> pair(n * n, 0);
 #pragma omp parallel for schedule(dynamic, 16)
   for (size_t a = 0; a < n; ++a)
-    for (size_t b = 0; b < n; ++b) pair[a * n + b] = a == b ? Consistency{0, 0} : consistency(src, tgt, candidates[a], candidates[b], gamma);
+    for (size_t b = a + 1; b < n; ++b) pair[a * n + b] = agreement(src, tgt, candidates[a], candidates[b], gamma, t_gc);
+  for (size_t a = 0; a < n; ++a)
+    for (size_t b = 0; b < a; ++b) pair[a * n + b] = pair[b * n + a];
   std::vector<size_t> kept, support(n, 0);
   for (size_t a = 0; a < n; ++a) {
-    for (size_t b = 0; b < n; ++b) support[a] += b != a && pair[a * n + b].d_gc < params.geometric_consistency;
+    for (size_t b = 0; b < n; ++b) support[a] += (pair[a * n + b] & kConsistent) != 0;
     if (static_cast<int>(support[a]) + 1 >= params.min_group_size) kept.push_back(a);
   }
   std::stable_sort(kept.begin(), kept.end(), [&](size_t a, size_t b) { return support[a] > support[b]; });
@@ -85,7 +89,7 @@ GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tg
       if (c == kept[s]) continue;
       bool ok = true;
       for (size_t g : group)
-        if (pair[c * n + g].w_gc >= params.geometric_consistency) {
+        if (!(pair[c * n + g] & kGroupable)) {
           ok = false;
           break;
         }

@@ -29,6 +29,20 @@ std::optional<std::pair<size_t, float>> nearest_below(const Tree& tree, const Ei
   if (result.size() == 0) return std::nullopt;
   return std::pair{index, dist_sq};
 }
+
+// nanoflann's radius result set, collecting the indices alone into the caller's vector (its own
+// collects index-distance pairs into one more vector, allocated on every query).
+struct IndexCollector {
+  float radius_sq;
+  std::vector<size_t>& indices;
+  size_t size() const { return indices.size(); }
+  bool full() const { return true; }
+  bool addPoint(float dist_sq, size_t index) {
+    if (dist_sq < radius_sq) indices.push_back(index);
+    return true;
+  }
+  float worstDist() const { return radius_sq; }
+};
 }  // namespace
 
 struct KdTree3::Impl {
@@ -55,12 +69,9 @@ std::optional<std::pair<size_t, float>> KdTree3::nearest_within(const Eigen::Vec
 }
 
 void KdTree3::within(const Eigen::Vector3f& query, float radius, std::vector<size_t>& indices) const {
-  std::vector<std::pair<size_t, float>> matches;
-  nanoflann::SearchParams params(32, 0.0f, false);
-  impl_->tree.radiusSearch(query.data(), radius * radius, matches, params);
   indices.clear();
-  indices.reserve(matches.size());
-  for (const auto& m : matches) indices.push_back(m.first);
+  IndexCollector collector{radius * radius, indices};
+  impl_->tree.findNeighbors(collector, query.data(), nanoflann::SearchParams(32, 0.0f, false));
 }
 
 const std::vector<Eigen::Vector3f>& KdTree3::points() const { return impl_->cloud.pts; }

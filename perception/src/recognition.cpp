@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <deque>
 #include <cmath>
@@ -67,6 +68,40 @@ Plane largest_plane(const PointCloud& cloud, const std::vector<char>& taken, dou
   return best;
 }
 
+// The nearest depth seen in each bin of a view's projection (a bin packed into one key): an
+// open-addressing table with linear probing, an infinite depth marking a free slot (a depth seen
+// is finite). The free-space test looks up a dozen bins per model point and check, millions per
+// scene; std::unordered_map's node per entry made them a third of the check's time.
+class BinDepths {
+ public:
+  /// Empty, with room for `entries` bins.
+  void reset(size_t entries) {
+    size_t capacity = 16;
+    while (capacity < 2 * entries) capacity *= 2;
+    shift_ = 64 - std::countr_zero(capacity);
+    keys_.resize(capacity);
+    depths_.assign(capacity, kFree);
+  }
+  /// The bin's depth becomes the smaller of its own and `depth`.
+  void keep_min(int64_t key, double depth) {
+    size_t i = slot(key);
+    while (depths_[i] != kFree && keys_[i] != key) i = (i + 1) & (keys_.size() - 1);
+    if (depths_[i] == kFree || depth < depths_[i]) keys_[i] = key, depths_[i] = depth;
+  }
+  /// The bin's depth, infinite when nothing was seen there.
+  double at(int64_t key) const {
+    for (size_t i = slot(key);; i = (i + 1) & (keys_.size() - 1))
+      if (depths_[i] == kFree || keys_[i] == key) return depths_[i];
+  }
+
+ private:
+  static constexpr double kFree = std::numeric_limits<double>::infinity();
+  size_t slot(int64_t key) const { return static_cast<size_t>((static_cast<uint64_t>(key) * 0x9e3779b97f4a7c15ull) >> shift_); }
+  int shift_ = 60;
+  std::vector<int64_t> keys_;
+  std::vector<double> depths_;
+};
+
 // What each sensor saw of the scene, for the free-space test: per view, the nearest scene depth
 // in each bin of a projection (gnomonic about the view's main direction for perspective rays, an
 // orthographic grid for parallel rays).
@@ -100,12 +135,9 @@ class FreeSpace {
       }
       // Bins about 1.5 resolutions wide at the scene's median depth.
       m.bin = view.rays == SensorView::Rays::kPerspective ? 1.5 * resolution_m / median : 1.5 * resolution_m;
-      for (const auto& p : scene.points) {
-        const auto key = m.key(p.cast<double>());
-        if (!key) continue;
-        auto [it, inserted] = m.nearest.try_emplace(Map::pack(key->u, key->v), key->depth);
-        if (!inserted) it->second = std::min(it->second, key->depth);
-      }
+      m.nearest.reset(scene.points.size());
+      for (const auto& p : scene.points)
+        if (const auto key = m.key(p.cast<double>())) m.nearest.keep_min(Map::pack(key->u, key->v), key->depth);
       maps_.push_back(std::move(m));
     }
   }
@@ -181,16 +213,15 @@ class FreeSpace {
       return near[i] == 1;
     };
     std::vector<char> counted(p.size(), 0), violates(p.size(), 0), expected(p.size(), 0), seen_there(p.size(), 0), hidden(p.size(), 0);
-    std::unordered_map<int64_t, double> self;  // the model's own nearest depth per bin
+    BinDepths self;  // the model's own nearest depth per bin
     std::vector<std::optional<Key>> keys(p.size());
     for (const auto& m : maps_) {
-      self.clear();
+      self.reset(p.size());
 #pragma omp parallel for schedule(static)
       for (size_t i = 0; i < p.size(); ++i) keys[i] = m.key(p[i]);
       for (size_t i = 0; i < p.size(); ++i) {
         if (!keys[i] || n[i].dot(m.toward(p[i])) <= 0) continue;
-        auto [it, inserted] = self.try_emplace(Map::pack(keys[i]->u, keys[i]->v), keys[i]->depth);
-        if (!inserted) it->second = std::min(it->second, keys[i]->depth);
+        self.keep_min(Map::pack(keys[i]->u, keys[i]->v), keys[i]->depth);
       }
       // Each point's own entries only: the points are independent.
 #pragma omp parallel for schedule(dynamic, 256)
@@ -201,7 +232,7 @@ class FreeSpace {
         const double seen = m.nearest_around(*keys[i]);
         if (!std::isfinite(seen)) continue;  // the sensor saw nothing there: no evidence either way
         const int64_t bin = Map::pack(keys[i]->u, keys[i]->v);
-        const bool returned = !own_bin_only_ || incidence_cos > grazing_cos_ || m.nearest.count(bin);
+        const bool returned = !own_bin_only_ || incidence_cos > grazing_cos_ || std::isfinite(m.nearest.at(bin));
         if (returned) {
           counted[i] = 1;
           if (keys[i]->depth < seen - tolerance_) violates[i] = 1;
@@ -329,7 +360,8 @@ class FreeSpace {
   struct Solid {
     Eigen::Vector3d normal, u, v;
     double offset = 0;
-    std::vector<Eigen::Vector2d> hull;  ///< counter-clockwise
+    std::vector<Eigen::Vector2d> hull;   ///< counter-clockwise
+    std::vector<Eigen::Vector2d> edges;  ///< unit direction from each hull point to the next
     Solid(const PointCloud& scene, const std::vector<size_t>& face, const Eigen::Vector3f& plane_normal, float plane_offset)
         : normal(plane_normal.cast<double>()), offset(plane_offset) {
       double facing = 0;
@@ -356,6 +388,7 @@ class FreeSpace {
       }
       h.resize(k > 1 ? k - 1 : k);
       hull = std::move(h);
+      for (size_t i = 0; i < hull.size(); ++i) edges.push_back((hull[(i + 1) % hull.size()] - hull[i]).normalized());
     }
     Eigen::Vector2d in_plane(const Eigen::Vector3d& p) const { return {u.dot(p), v.dot(p)}; }
     /// How far the point's foot on the plane lies outside the face's region [m] (at most 0: inside).
@@ -364,9 +397,8 @@ class FreeSpace {
       const Eigen::Vector2d q = in_plane(p);
       double out = -std::numeric_limits<double>::infinity();
       for (size_t i = 0; i < hull.size(); ++i) {
-        const Eigen::Vector2d edge = (hull[(i + 1) % hull.size()] - hull[i]).normalized();
         const Eigen::Vector2d r = q - hull[i];
-        out = std::max(out, edge.y() * r.x() - edge.x() * r.y());  // right of the edge: outside
+        out = std::max(out, edges[i].y() * r.x() - edges[i].x() * r.y());  // right of the edge: outside
       }
       return out;
     }
@@ -402,7 +434,7 @@ class FreeSpace {
     SensorView view;
     Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  ///< rows: local x, y, z (z along the view)
     double bin = 1.0;
-    std::unordered_map<int64_t, double> nearest;
+    BinDepths nearest;
     static int64_t pack(int64_t u, int64_t v) { return static_cast<int64_t>((static_cast<uint64_t>(u) << 32) ^ (static_cast<uint64_t>(v) & 0xffffffffu)); }
     Eigen::Vector3d local(const Eigen::Vector3d& p) const {
       return view.rays == SensorView::Rays::kPerspective ? Eigen::Vector3d(R * (p - view.origin_mesh)) : Eigen::Vector3d(R * p);
@@ -415,13 +447,13 @@ class FreeSpace {
       double seen = std::numeric_limits<double>::infinity();
       for (int du = -1; du <= 1; ++du)
         for (int dv = -1; dv <= 1; ++dv)
-          if (auto it = nearest.find(pack(k.u + du, k.v + dv)); it != nearest.end()) seen = std::min(seen, it->second);
+          seen = std::min(seen, nearest.at(pack(k.u + du, k.v + dv)));
       return seen;
     }
     /// The seen depth in the point's own bin, else the nearest around it.
     double seen_at(const Key& k) const {
-      if (auto it = nearest.find(pack(k.u, k.v)); it != nearest.end()) return it->second;
-      return nearest_around(k);
+      const double own = nearest.at(pack(k.u, k.v));
+      return std::isfinite(own) ? own : nearest_around(k);
     }
     std::optional<Key> key(const Eigen::Vector3d& p) const {
       const Eigen::Vector3d q = local(p);
