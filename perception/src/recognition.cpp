@@ -1257,9 +1257,13 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     const auto taken = [&](const Transform& T) { return on_accepted(model, T); };
     for (int round = 0; round < std::max(params.search_rounds, 1) && !s.winner; ++round) {
       std::vector<Verified> batch;
-      for (const auto& st : ranked_starts(s, round == 0)) {
+      const auto starts = ranked_starts(s, round == 0);
+      // One coarse ICP per thread: each is too short (750 points) to share well.
+#pragma omp parallel for schedule(dynamic, 1)
+      for (size_t k = 0; k < starts.size(); ++k)
+        if (PoseHypothesis& h = *starts[k].origin; !h.coarse) h.coarse = icp_point_to_plane(model, scene_points, scene_tree, h.T_scene_model, coarse);
+      for (const auto& st : starts) {
         PoseHypothesis& h = *st.origin;
-        if (!h.coarse) h.coarse = icp_point_to_plane(model, scene_points, scene_tree, h.T_scene_model, coarse);
         const IcpResult& r = *h.coarse;
         batch.push_back({r.T_target_source, r, coarse_score(r, res), h.source == RecognitionCandidate::Source::grouping ? h.size : h.support,
                          std::nullopt, &h});
