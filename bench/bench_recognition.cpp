@@ -275,6 +275,7 @@ int main(int argc, char** argv) {
       else if (k == "max_candidates_verified") tuned.max_candidates_verified = int(v);
       else if (k == "turn_steps") tuned.turn_steps = int(v);
       else if (k == "turn_margin") tuned.turn_margin = v;
+      else if (k == "refused_turns") tuned.refused_turns = int(v);
       else if (k == "rivals") tuned.rivals = int(v);
       else if (k == "rival_margin") tuned.rival_margin = v;
       else if (k == "rival_coarse_slack") tuned.rival_coarse_slack = v;

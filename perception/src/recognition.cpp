@@ -1160,6 +1160,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // Refused by a small margin on the visibility tests alone (a pose a few millimetres off
   // along a pipe's axis: its end in free space, or short of the seen end).
   const Slack near_passing{.free_space = 2, .explained = 0.1, .continued = 3};
+  // Fits the scene (overlap, residual), whatever the visibility tests say but the plane tests.
+  const Slack fits_only{.free_space = 1e9, .explained = 1e9};
   struct Verified {
     Transform T;
     IcpResult icp;
@@ -1255,6 +1257,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     s.winner.reset();
     s.coarse_poses.clear();
     const auto taken = [&](const Transform& T) { return on_accepted(model, T); };
+    int turned_refused = 0;
     for (int round = 0; round < std::max(params.search_rounds, 1) && !s.winner; ++round) {
       std::vector<Verified> batch;
       const auto starts = ranked_starts(s, round == 0);
@@ -1302,6 +1305,22 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
             v.T = slid->icp.T_target_source;
             v.seen = slid->seen;
           }
+        // A part the ICP fits to the scene (its overlap and residual pass) that the visibility tests
+        // refuse may lie at the right place turned wrong about its run: a tee's branch or a valve's
+        // stem where the sensor saw through it. Its turns are tried; one that passes takes its place
+        // when it leaves less than half of what the sensor should have seen of it hidden (on a part
+        // mostly hidden, a turn that puts the rest where nothing contradicts it proves little).
+        if (turned_refused < params.refused_turns && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, fits_only)) {
+          ++turned_refused;
+          constexpr double kAny = -std::numeric_limits<double>::infinity();
+          auto turns = turns_of(model, library.turn_axes(s.m), v.T, kAny, kAny, scene_points, scene_tree, free_space, coarse, fine, params, res,
+                                passes, taken);
+          if (turns.better && turns.better->seen.occluded < 0.5) {
+            v.icp = turns.better->icp;
+            v.T = turns.better->icp.T_target_source;
+            v.seen = turns.better->seen;
+          }
+        }
         const auto& seen = *v.seen;
         if (params.drop_refused_planes && (seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction))
           refused_on_plane(s, v.T, seen.planarity);

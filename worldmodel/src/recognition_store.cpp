@@ -156,6 +156,7 @@ std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id,
                            {"max_through_fraction", params.max_through_fraction},
                            {"no_votes_on_support", params.no_votes_on_support},
                            {"turn_steps", params.turn_steps},
+                           {"refused_turns", params.refused_turns},
                            {"rivals", params.rivals},
                            {"rival_margin", params.rival_margin}};
   std::vector<RecognizedObject> out;

@@ -249,6 +249,11 @@ struct RecognitionParams {
   /// where nothing contradicts it.
   int turn_steps = 12;
   double turn_margin = 0.01;           ///< [1] by how much more (overlap, less free-space share)
+  /// [1] per instance search, up to this many refined poses that fit the scene (overlap and
+  /// residual pass) but that the visibility tests refuse are also tried turned (turn_steps); a
+  /// turn that passes every test takes the pose's place. A tee at the right place with its branch
+  /// turned into seen free space, or down through the table, is refused however well its run fits.
+  int refused_turns = 1;
   /// [1] once a search has a pose that passes, up to this many of its poses not refined yet at the
   /// same place (centre within half the model's diameter) whose coarse ICP put at least as much of
   /// the model on the scene as the coarse ICP does from the winner (less rival_coarse_slack) are
