@@ -1160,8 +1160,10 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // Refused by a small margin on the visibility tests alone (a pose a few millimetres off
   // along a pipe's axis: its end in free space, or short of the seen end).
   const Slack near_passing{.free_space = 2, .explained = 0.1, .continued = 3};
-  // Fits the scene (overlap, residual), whatever the visibility tests say but the plane tests.
-  const Slack fits_only{.free_space = 1e9, .explained = 1e9};
+  // Fits the scene (overlap, residual), whatever the free-space and seen-surface tests say (the
+  // plane, silhouette and through tests still hold).
+  constexpr double kAnyShare = std::numeric_limits<double>::infinity();
+  const Slack fits_only{.free_space = kAnyShare, .explained = kAnyShare};
   struct Verified {
     Transform T;
     IcpResult icp;
