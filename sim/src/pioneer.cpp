@@ -134,11 +134,8 @@ Acquisition scan_pioneer(Renderer& renderer, const Workcell& cell, const Transfo
   // camera sees too (a stereo pair measures only what both its cameras see; the head fuses the
   // two pairs and keeps either alone). A surface only the left camera sees - in a slot, behind
   // an edge from the others - is not visible, however plainly the left image shows it.
-  const auto seen_from = [&](const RenderResult& other, const Transform& T_sensor_other, const Eigen::Vector3d& p_sensor) {
-    const Eigen::Vector3d q = T_sensor_other.inverse() * p_sensor;
-    const auto farthest = farthest_depth_around(other, cam, q);
-    return farthest && q.z() <= *farthest + 0.003 + 0.002 * q.z();
-  };
+  const Transform T_right_sensor = T_sensor_right.inverse(), T_top_sensor = T_sensor_top.inverse();
+  constexpr double kTolerance = 0.003;  // [m] as the Vivid's shadow test, plus 0.2% of the depth
   std::vector<char> measurable(static_cast<size_t>(W) * H, 0);
   for (int v = 0; v < H; ++v)
     for (int u = 0; u < W; ++u) {
@@ -146,7 +143,7 @@ Acquisition scan_pioneer(Renderer& renderer, const Workcell& cell, const Transfo
       const float z = left.depth_m[i];
       if (z <= 0 || z < p.min_range_m || z > p.max_range_m) continue;
       const Eigen::Vector3d p_sensor = cam.unproject({u, v}, z);
-      measurable[i] = seen_from(right, T_sensor_right, p_sensor) || seen_from(top, T_sensor_top, p_sensor);
+      measurable[i] = sees_point(right, cam, T_right_sensor * p_sensor, kTolerance) || sees_point(top, cam, T_top_sensor * p_sensor, kTolerance);
     }
   acq.truth = view_truth(renderer, cell, r.sensor.kind, seed, cam, T_world_sensor, left.instance_ids, left.depth_m, near_m, far_m, measurable);
   return acq;

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <optional>
 #include <random>
 
 #define GL_GLEXT_PROTOTYPES 1
@@ -355,8 +356,8 @@ std::vector<Eigen::Vector3f> unproject_depth(const PinholeCamera& camera, const 
   return points;
 }
 
-std::optional<float> farthest_depth_around(const RenderResult& render, const PinholeCamera& camera, const Eigen::Vector3d& p_camera) {
-  if (!(p_camera.z() > 0)) return std::nullopt;
+bool sees_point(const RenderResult& render, const PinholeCamera& camera, const Eigen::Vector3d& p_camera, double tolerance_m) {
+  if (!(p_camera.z() > 0)) return false;
   const double u = camera.fx * p_camera.x() / p_camera.z() + camera.cx, v = camera.fy * p_camera.y() / p_camera.z() + camera.cy;
   const int iu = static_cast<int>(std::floor(u)), iv = static_cast<int>(std::floor(v));
   std::optional<float> farthest;
@@ -367,7 +368,7 @@ std::optional<float> farthest_depth_around(const RenderResult& render, const Pin
       const float d = render.depth_m[static_cast<size_t>(vv) * render.width + uu];
       farthest = std::max(farthest.value_or(0.f), d > 0 ? d : 1e9f);
     }
-  return farthest;
+  return farthest && p_camera.z() <= *farthest + tolerance_m + 0.002 * p_camera.z();
 }
 
 }  // namespace artisan::sim

@@ -127,8 +127,7 @@ Acquisition scan_vivid(Renderer& renderer, const Workcell& cell, const Transform
       const Eigen::Vector3f& ps = points_true[i];
       // Shadowing: the laser must reach the point (the camera sees it by construction).
       const Eigen::Vector3d pl = ps.cast<double>() - emitter_sensor;
-      const auto lit_depth = farthest_depth_around(laser, laser_cam, pl);
-      if (!lit_depth || pl.z() > *lit_depth + p.shadow_tolerance_m + 0.002 * pl.z()) continue;
+      if (!sees_point(laser, laser_cam, pl, p.shadow_tolerance_m)) continue;
       // Grazing incidence, for the camera or the laser, whichever is worse. Beyond the limit the
       // scanner never returns anything: not measurable, like a shadow (a flange seen edge-on is
       // hidden from it however plainly the camera sees its face).

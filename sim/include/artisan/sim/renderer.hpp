@@ -9,7 +9,6 @@
 // the depth buffer's quantisation (24 bits: about z^2 / near * 6e-8 m).
 #include <cstdint>
 #include <memory>
-#include <optional>
 #include <vector>
 
 #include "artisan/core/camera.hpp"
@@ -37,11 +36,12 @@ struct RenderResult {
   std::vector<uint16_t> instance_ids;  ///< Body::instance_id per pixel; 0 = nothing (empty unless requested)
 };
 
-/// The farthest depth a render (with depth) saw in the 2 x 2 pixels around where `p_camera`, a
-/// point in its camera's frame, projects - lenient on slopes; a pixel that saw nothing counts as
-/// infinitely far - or none when the point projects outside the image or lies behind the camera.
-/// Whether another camera (a scanner's laser, a stereo partner) sees a point: it lies no farther.
-std::optional<float> farthest_depth_around(const RenderResult& render, const PinholeCamera& camera, const Eigen::Vector3d& p_camera);
+/// Whether the camera of a render (with depth) sees `p_camera`, a point in its frame: it projects
+/// into the image, in front of the camera, and lies no farther than the farthest depth seen in
+/// the 2 x 2 pixels around it (lenient on slopes; a pixel that saw nothing is infinitely far) by
+/// more than `tolerance_m` plus 0.2% of its depth. Whether another camera (a scanner's laser, a
+/// stereo partner) sees what this one does.
+bool sees_point(const RenderResult& render, const PinholeCamera& camera, const Eigen::Vector3d& p_camera, double tolerance_m);
 
 class Renderer {
  public:
