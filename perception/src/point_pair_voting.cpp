@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <unordered_map>
 
 #include <Eigen/Geometry>
 
@@ -146,30 +147,47 @@ std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std
       const size_t r = references[k];
       const Transform T_local_scene = to_local(s[r], sn[r]);
       const AlphaFrame frame = alpha_frame(T_local_scene, s[r]);
-      std::fill(accumulator.begin(), accumulator.end(), 0u);
       tree.within(s[r], radius, near);
       for (const size_t i : near) {
         if (i == r) continue;
         const auto c = cell(s[r], sn[r], s[i], sn[i]);
         if (c < 0) continue;
+        const uint32_t* const first = entries_.data() + offsets_[static_cast<size_t>(c)];
+        const uint32_t entries = offsets_[static_cast<size_t>(c) + 1] - offsets_[static_cast<size_t>(c)];
+        if (entries == 0) continue;
         const uint32_t alpha_s = alpha_of(frame, s[i]);
         // The innermost loop, a billion times per model and scene: plain pointers (through the
         // vectors the compiler reloads the bound after every increment, as the counts might
         // alias the offsets), and each entry one word, its model point over its alpha_m; the
         // rotation alpha_s - alpha_m modulo a turn, times the bins, over 2^16 is its bin.
         uint32_t* const votes = accumulator.data();
-        const uint32_t* const end = entries_.data() + offsets_[static_cast<size_t>(c) + 1];
-        for (const uint32_t* e = entries_.data() + offsets_[static_cast<size_t>(c)]; e != end; ++e)
+        for (const uint32_t* e = first; e != first + entries; ++e)
           ++votes[(*e >> 16) * alpha_bins + ((((alpha_s - *e) & 0xffffu) * alpha_bins) >> 16)];
       }
-      // The largest cells, at most peaks_per_reference of them.
+      // The largest cells, at most peaks_per_reference of them, by blocks: a block none of whose
+      // cells could enter is passed on its maximum alone (most are). Read, a block is zeroed
+      // for the next reference point.
       auto& mine = peaks[k];
+      const auto wanted = static_cast<size_t>(params_.peaks_per_reference);
       std::vector<std::pair<uint32_t, size_t>> best;  // votes, cell
-      for (size_t c = 0; c < accumulator.size(); ++c) {
-        if (accumulator[c] == 0 || (best.size() == static_cast<size_t>(params_.peaks_per_reference) && accumulator[c] <= best.back().first)) continue;
-        if (best.size() == static_cast<size_t>(params_.peaks_per_reference)) best.pop_back();
-        best.insert(std::upper_bound(best.begin(), best.end(), accumulator[c], [](uint32_t v, const auto& b) { return v > b.first; }),
-                    {accumulator[c], c});
+      uint32_t floor = 0;  // a cell must exceed this to enter
+      constexpr size_t kBlock = 32;
+      for (size_t b = 0; b < accumulator.size(); b += kBlock) {
+        uint32_t* const block = accumulator.data() + b;
+        const size_t n = std::min(kBlock, accumulator.size() - b);
+        uint32_t most = 0;
+        for (size_t j = 0; j < n; ++j) most = std::max(most, block[j]);
+        if (most <= floor) {
+          if (most > 0) std::fill(block, block + n, 0u);
+          continue;
+        }
+        for (size_t j = 0; j < n; ++j) {
+          if (block[j] <= floor) continue;
+          if (best.size() == wanted) best.pop_back();
+          best.insert(std::upper_bound(best.begin(), best.end(), block[j], [](uint32_t v, const auto& e) { return v > e.first; }), {block[j], b + j});
+          if (best.size() == wanted) floor = best.back().first;
+        }
+        std::fill(block, block + n, 0u);
       }
       const Transform T_scene_local = T_local_scene.inverse();
       for (const auto& [votes, c] : best) {
@@ -193,22 +211,50 @@ std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std
   const double max_angle = params_.cluster_angle_deg * std::numbers::pi / 180;
   struct Cluster {
     Transform first;
+    Eigen::Vector4d first_rotation;  ///< the first's quaternion
     Eigen::Vector3d centre, translation_sum = Eigen::Vector3d::Zero();
     Eigen::Vector4d rotation_sum = Eigen::Vector4d::Zero();  ///< quaternions on the first's side
     uint32_t votes = 0;
   };
   std::vector<Cluster> clusters;
+  // The clusters by their first pose's centre, in cubes of the cluster distance: a pose's first
+  // cluster is among those of the 27 cubes about its own (in each cube's list by creation).
+  // Turned by less than max_angle: the trace of the rotation between them above 1 + 2 cos(max_angle).
+  std::unordered_map<uint64_t, std::vector<uint32_t>> cubes;
+  const auto cube_of = [max_distance](const Eigen::Vector3d& c) {
+    return Eigen::Vector3i((c / max_distance).array().floor().cast<int>());
+  };
+  const auto key_of = [](const Eigen::Vector3i& q) {
+    const auto u = [](int v) { return static_cast<uint64_t>(static_cast<uint32_t>(v)); };
+    return u(q.x()) * 0x9e3779b97f4a7c15ull ^ u(q.y()) * 0xc2b2ae3d27d4eb4full ^ u(q.z()) * 0x165667b19e3779f9ull;
+  };
+  const double min_trace = 1 + 2 * std::cos(max_angle);
   for (const auto& p : poses) {
     const Eigen::Vector3d c = p.T_scene_model * centre;
-    auto it = std::find_if(clusters.begin(), clusters.end(), [&](const Cluster& k) {
-      return (k.centre - c).norm() < max_distance && rotation_angle(k.first.inverse() * p.T_scene_model) < max_angle;
-    });
-    if (it == clusters.end()) it = clusters.insert(clusters.end(), Cluster{p.T_scene_model, c});
-    Eigen::Vector4d q = Eigen::Quaterniond(p.T_scene_model.linear()).coeffs();
-    if (q.dot(Eigen::Quaterniond(it->first.linear()).coeffs()) < 0) q = -q;
-    it->rotation_sum += p.votes * q;
-    it->translation_sum += p.votes * p.T_scene_model.translation();
-    it->votes += p.votes;
+    const Eigen::Matrix3d R = p.T_scene_model.linear();
+    const Eigen::Vector3i home = cube_of(c);
+    auto first = static_cast<uint32_t>(clusters.size());
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto cube = cubes.find(key_of(home + Eigen::Vector3i(dx, dy, dz)));
+          if (cube == cubes.end()) continue;
+          for (const uint32_t j : cube->second) {
+            if (j >= first) break;
+            const Cluster& k = clusters[j];
+            if ((k.centre - c).norm() < max_distance && (k.first.linear().cwiseProduct(R)).sum() > min_trace) first = j;
+          }
+        }
+    if (first == clusters.size()) {
+      clusters.push_back(Cluster{p.T_scene_model, Eigen::Quaterniond(R).coeffs(), c});
+      cubes[key_of(home)].push_back(first);
+    }
+    Cluster& k = clusters[first];
+    Eigen::Vector4d q = Eigen::Quaterniond(R).coeffs();
+    if (q.dot(k.first_rotation) < 0) q = -q;
+    k.rotation_sum += p.votes * q;
+    k.translation_sum += p.votes * p.T_scene_model.translation();
+    k.votes += p.votes;
   }
   for (const auto& k : clusters) {
     VotedPose v;
