@@ -484,6 +484,8 @@ int main(int argc, char** argv) {
           std::fprintf(stderr, "    in the world at %.3f %.3f %.3f, its z axis %.2f %.2f %.2f, its lowest point at z = %.3f\n", T_world_model.translation().x(),
                        T_world_model.translation().y(), T_world_model.translation().z(), T_world_model.linear()(0, 2), T_world_model.linear()(1, 2),
                        T_world_model.linear()(2, 2), lowest);
+          const auto c = check_pose(scene, library, i.model_index, i.T_scene_model, params, false);
+          std::fprintf(stderr, "    measured again there: planarity %.3f through %.3f\n", c.support_planarity, c.through_fraction);
         }
       }
       if (!dump.empty())  // every pose of that model tried or proposed, and how far from the nearest true instance
