@@ -44,7 +44,8 @@ uint32_t alpha_of(const AlphaFrame& f, const Eigen::Vector3f& partner) {
 
 }  // namespace
 
-int64_t PairFeatureModel::cell(const Eigen::Vector3f& p1, const Eigen::Vector3f& n1, const Eigen::Vector3f& p2, const Eigen::Vector3f& n2) const {
+inline int64_t PairFeatureModel::cell(const Eigen::Vector3f& p1, const Eigen::Vector3f& n1, const Eigen::Vector3f& p2,
+                                      const Eigen::Vector3f& n2) const {
   const Eigen::Vector3f d = p2 - p1;
   const float length = d.norm();
   if (!(length > 0.5f * static_cast<float>(params_.step_m))) return -1;
@@ -210,8 +211,8 @@ std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std
   const double max_distance = params_.cluster_distance_factor * diameter_;
   const double max_angle = params_.cluster_angle_deg * std::numbers::pi / 180;
   struct Cluster {
-    Transform first;
-    Eigen::Vector4d first_rotation;  ///< the first's quaternion
+    Eigen::Matrix3d first;           ///< the first pose's rotation
+    Eigen::Vector4d first_rotation;  ///< the same as a quaternion
     Eigen::Vector3d centre, translation_sum = Eigen::Vector3d::Zero();
     Eigen::Vector4d rotation_sum = Eigen::Vector4d::Zero();  ///< quaternions on the first's side
     uint32_t votes = 0;
@@ -242,11 +243,11 @@ std::vector<VotedPose> PairFeatureModel::vote(const PointCloud& scene, const std
           for (const uint32_t j : cube->second) {
             if (j >= first) break;
             const Cluster& k = clusters[j];
-            if ((k.centre - c).norm() < max_distance && (k.first.linear().cwiseProduct(R)).sum() > min_trace) first = j;
+            if ((k.centre - c).norm() < max_distance && k.first.cwiseProduct(R).sum() > min_trace) first = j;
           }
         }
     if (first == clusters.size()) {
-      clusters.push_back(Cluster{p.T_scene_model, Eigen::Quaterniond(R).coeffs(), c});
+      clusters.push_back(Cluster{R, Eigen::Quaterniond(R).coeffs(), c});
       cubes[key_of(home)].push_back(first);
     }
     Cluster& k = clusters[first];

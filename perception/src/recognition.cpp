@@ -568,38 +568,45 @@ std::vector<PoseHypothesis> pair_hypotheses(const PointCloud& model, const Point
   std::mt19937 rng(20101);  // fixed: the same scene gives the same hypotheses
   std::shuffle(order.begin(), order.end(), rng);
   if (order.size() > static_cast<size_t>(std::max(params.pair_anchors, 0))) order.resize(static_cast<size_t>(std::max(params.pair_anchors, 0)));
+  // The pairs tried, drawn in order (the draws are the hypotheses' order), then made and scored
+  // in parallel.
+  std::vector<std::pair<size_t, size_t>> tried;
   std::vector<size_t> near;
   for (const size_t a : order) {
+    anchor_tree.within(scene.points[anchors[a]], diameter, near);
+    std::erase_if(near, [&](size_t b) { return (anchor_points[b] - scene.points[anchors[a]]).norm() < min_distance; });
+    if (near.empty()) continue;
+    for (int t = 0; t < params.pair_partners; ++t) tried.emplace_back(a, near[rng() % near.size()]);
+  }
+  std::vector<std::vector<PoseHypothesis>> of_pair(tried.size());
+#pragma omp parallel for schedule(dynamic, 16)
+  for (size_t k = 0; k < tried.size(); ++k) {
+    const auto [a, b] = tried[k];
     const Eigen::Vector3f& s_a = scene.points[anchors[a]];
     const Eigen::Vector3f& ns_a = scene.normals[anchors[a]];
-    anchor_tree.within(s_a, diameter, near);
-    std::erase_if(near, [&](size_t b) { return (anchor_points[b] - s_a).norm() < min_distance; });
-    if (near.empty()) continue;
-    for (int t = 0; t < params.pair_partners; ++t) {
-      const size_t b = near[rng() % near.size()];
-      const Eigen::Vector3f& s_b = scene.points[anchors[b]];
-      const Eigen::Vector3f& ns_b = scene.normals[anchors[b]];
-      const Eigen::Vector3f d_s = s_b - s_a;
-      const float l_s = d_s.norm();
-      const Eigen::Vector3f u_s = d_s / l_s;
-      const float f1 = angle(ns_a, u_s), f2 = angle(ns_b, u_s), f3 = angle(ns_a, ns_b);
-      for (const size_t m_a : model_of[a])
-        for (const size_t m_b : model_of[b]) {
-          if (m_a == m_b) continue;
-          const Eigen::Vector3f d_m = model.points[m_b] - model.points[m_a];
-          const float l_m = d_m.norm();
-          if (std::abs(l_m - l_s) > tolerance) continue;
-          const Eigen::Vector3f u_m = d_m / l_m;
-          if (std::abs(angle(model.normals[m_a], u_m) - f1) > angle_tolerance || std::abs(angle(model.normals[m_b], u_m) - f2) > angle_tolerance ||
-              std::abs(angle(model.normals[m_a], model.normals[m_b]) - f3) > angle_tolerance)
-            continue;
-          PoseHypothesis h;
-          h.T_scene_model = pose_from_pairs(model.points[m_a], model.normals[m_a], model.points[m_b], model.normals[m_b], s_a, ns_a, s_b, ns_b, l_s);
-          h.first_support = h.support = surface_support.first(h.T_scene_model, 1.5 * res);
-          if (h.support >= min_support) made.push_back(std::move(h));
-        }
-    }
+    const Eigen::Vector3f& s_b = scene.points[anchors[b]];
+    const Eigen::Vector3f& ns_b = scene.normals[anchors[b]];
+    const Eigen::Vector3f d_s = s_b - s_a;
+    const float l_s = d_s.norm();
+    const Eigen::Vector3f u_s = d_s / l_s;
+    const float f1 = angle(ns_a, u_s), f2 = angle(ns_b, u_s), f3 = angle(ns_a, ns_b);
+    for (const size_t m_a : model_of[a])
+      for (const size_t m_b : model_of[b]) {
+        if (m_a == m_b) continue;
+        const Eigen::Vector3f d_m = model.points[m_b] - model.points[m_a];
+        const float l_m = d_m.norm();
+        if (std::abs(l_m - l_s) > tolerance) continue;
+        const Eigen::Vector3f u_m = d_m / l_m;
+        if (std::abs(angle(model.normals[m_a], u_m) - f1) > angle_tolerance || std::abs(angle(model.normals[m_b], u_m) - f2) > angle_tolerance ||
+            std::abs(angle(model.normals[m_a], model.normals[m_b]) - f3) > angle_tolerance)
+          continue;
+        PoseHypothesis h;
+        h.T_scene_model = pose_from_pairs(model.points[m_a], model.normals[m_a], model.points[m_b], model.normals[m_b], s_a, ns_a, s_b, ns_b, l_s);
+        h.first_support = h.support = surface_support.first(h.T_scene_model, 1.5 * res);
+        if (h.support >= min_support) of_pair[k].push_back(std::move(h));
+      }
   }
+  for (auto& hypotheses : of_pair) made.insert(made.end(), std::make_move_iterator(hypotheses.begin()), std::make_move_iterator(hypotheses.end()));
   return made;
 }
 
@@ -612,13 +619,16 @@ std::vector<PoseHypothesis> voting_hypotheses(const detail::PairFeatureModel& ta
   auto voted = table.vote(scene, background);
   if (voted.size() > static_cast<size_t>(params.voting_pool)) voted.resize(static_cast<size_t>(params.voting_pool));
   const size_t min_support = surface_support.min_support(params.pair_min_support);
-  for (const auto& v : voted) {
-    PoseHypothesis h;
-    h.T_scene_model = v.T_scene_model;
+  std::vector<PoseHypothesis> scored(voted.size());
+#pragma omp parallel for schedule(dynamic, 4)
+  for (size_t k = 0; k < voted.size(); ++k) {
+    PoseHypothesis& h = scored[k];
+    h.T_scene_model = voted[k].T_scene_model;
     h.source = RecognitionCandidate::Source::voting;
     h.first_support = h.support = surface_support.first(h.T_scene_model, 1.5 * res);
-    if (h.support >= min_support) made.push_back(std::move(h));
   }
+  for (auto& h : scored)
+    if (h.support >= min_support) made.push_back(std::move(h));
   return made;
 }
 
@@ -631,15 +641,17 @@ std::vector<PoseHypothesis> axis_hypotheses(const detail::ModelCylinder& cylinde
   std::vector<PoseHypothesis> made;
   const size_t min_support = surface_support.min_support(params.pair_min_support);
   for (const auto& axis : axes) {
-    std::vector<PoseHypothesis> on;
-    size_t best = 0;
-    for (const auto& T : detail::poses_on_axis(cylinder, axis, params.axis_step_factor * res, params.turn_steps)) {
-      PoseHypothesis& h = on.emplace_back();
-      h.T_scene_model = T;
+    const auto poses = detail::poses_on_axis(cylinder, axis, params.axis_step_factor * res, params.turn_steps);
+    std::vector<PoseHypothesis> on(poses.size());
+#pragma omp parallel for schedule(dynamic, 4)
+    for (size_t k = 0; k < poses.size(); ++k) {
+      PoseHypothesis& h = on[k];
+      h.T_scene_model = poses[k];
       h.source = RecognitionCandidate::Source::axis;
-      h.first_support = h.support = surface_support.first(T, 1.5 * res);
-      best = std::max(best, h.support);
+      h.first_support = h.support = surface_support.first(poses[k], 1.5 * res);
     }
+    size_t best = 0;
+    for (const auto& h : on) best = std::max(best, h.support);
     for (auto& h : on)
       if (h.support >= min_support && 10 * h.support >= 9 * best) made.push_back(std::move(h));
   }
