@@ -67,12 +67,15 @@ inline int64_t PairFeatureModel::cell(const Eigen::Vector3f& p1, const Eigen::Ve
 
 PairFeatureModel::PairFeatureModel(const PointCloud& model_points, const PairVotingParams& params) : params_(params) {
   if (!(params.step_m > 0) || params.angle_bins < 2 || params.angle_bins > 255 || params.alpha_bins < 4 || params.alpha_bins > 4096 ||
-      params.reference_stride < 1 || params.peaks_per_reference < 1 || !(params.max_cell_share > 0 && params.max_cell_share <= 1))
+      params.reference_stride < 1 || params.peaks_per_reference < 1 || !(params.max_cell_share > 0 && params.max_cell_share <= 1) ||
+      !(params.cluster_distance_factor > 0) || !(params.cluster_angle_deg > 0 && params.cluster_angle_deg <= 180))
     throw Error("point-pair voting: step " + std::to_string(params.step_m) + " m must be positive, angle bins " +
                 std::to_string(params.angle_bins) + " from 2 to 255, alpha bins " + std::to_string(params.alpha_bins) +
                 " from 4 to 4096, reference stride " +
                 std::to_string(params.reference_stride) + " and peaks " + std::to_string(params.peaks_per_reference) +
-                " at least 1, and max_cell_share " + std::to_string(params.max_cell_share) + " in (0, 1]");
+                " at least 1, max_cell_share " + std::to_string(params.max_cell_share) + " in (0, 1], cluster distance factor " +
+                std::to_string(params.cluster_distance_factor) + " positive and cluster angle " + std::to_string(params.cluster_angle_deg) +
+                " degrees in (0, 180]");
   if (model_points.normals.size() != model_points.points.size()) throw Error("point-pair voting: the model points have no normals");
   // An angle's bin from its cosine without the arc cosine: the cosines where bins start, and a
   // first guess by slots of 1/2048 of the cosine's range.

@@ -6,6 +6,7 @@
 // points marked to ignore do not vote; crowded cells are left out of the table; bad parameters throw.
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <numbers>
 
 #include <Eigen/Geometry>
@@ -103,6 +104,12 @@ TEST(PointPairVoting, BadParametersThrow) {
   EXPECT_THROW(detail::PairFeatureModel(model, params), Error);
   params = {};
   params.angle_bins = 256;  // a bin is one byte in the cosine table
+  EXPECT_THROW(detail::PairFeatureModel(model, params), Error);
+  params = {};
+  params.cluster_distance_factor = 0;  // the clusters are looked for in cubes of this size
+  EXPECT_THROW(detail::PairFeatureModel(model, params), Error);
+  params = {};
+  params.cluster_angle_deg = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(detail::PairFeatureModel(model, params), Error);
   // More than 65536 points at the step: refused before the table of every pair (90,000 squared
   // cells) is allocated.
