@@ -573,8 +573,9 @@ std::vector<PoseHypothesis> pair_hypotheses(const PointCloud& model, const Point
   std::vector<std::pair<size_t, size_t>> tried;
   std::vector<size_t> near;
   for (const size_t a : order) {
-    anchor_tree.within(scene.points[anchors[a]], diameter, near);
-    std::erase_if(near, [&](size_t b) { return (anchor_points[b] - scene.points[anchors[a]]).norm() < min_distance; });
+    const Eigen::Vector3f& s_a = scene.points[anchors[a]];
+    anchor_tree.within(s_a, diameter, near);
+    std::erase_if(near, [&](size_t b) { return (anchor_points[b] - s_a).norm() < min_distance; });
     if (near.empty()) continue;
     for (int t = 0; t < params.pair_partners; ++t) tried.emplace_back(a, near[rng() % near.size()]);
   }
@@ -1183,6 +1184,12 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     size_t size;
     std::optional<FreeSpace::Check> seen;  ///< once screened or refined
     PoseHypothesis* origin;                ///< the hypothesis it came from
+    /// Moved to a pose found from it (slid along its axis, turned), refined and checked there.
+    void move_to(const Moved& moved) {
+      icp = moved.icp;
+      T = moved.icp.T_target_source;
+      seen = moved.seen;
+    }
   };
   // A model's search for its next instance, kept between rounds.
   struct Search {
@@ -1314,11 +1321,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
         // what keeps the pose from passing.
         if (const auto* cylinder = library.cylinder(s.m); cylinder && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, near_passing))
-          if (auto slid = slid_along_axis(model, *cylinder, v.T, scene_points, scene_tree, free_space, fine, params.axis_slide_steps, res, passes)) {
-            v.icp = slid->icp;
-            v.T = slid->icp.T_target_source;
-            v.seen = slid->seen;
-          }
+          if (auto slid = slid_along_axis(model, *cylinder, v.T, scene_points, scene_tree, free_space, fine, params.axis_slide_steps, res, passes))
+            v.move_to(*slid);
         // A part the ICP fits to the scene (its overlap and residual pass) that the visibility tests
         // refuse may lie at the right place turned wrong about its run: a tee's branch or a valve's
         // stem where the sensor saw through it. Its turns are tried; one that passes takes its place
@@ -1329,11 +1333,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
           constexpr double kAny = -std::numeric_limits<double>::infinity();
           auto turns = turns_of(model, library.turn_axes(s.m), v.T, kAny, kAny, scene_points, scene_tree, free_space, coarse, fine, params, res,
                                 passes, taken);
-          if (turns.better && turns.better->seen.occluded < 0.5) {
-            v.icp = turns.better->icp;
-            v.T = turns.better->icp.T_target_source;
-            v.seen = turns.better->seen;
-          }
+          if (turns.better && turns.better->seen.occluded < 0.5) v.move_to(*turns.better);
         }
         const auto& seen = *v.seen;
         if (params.drop_refused_planes && (seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction))
@@ -1386,9 +1386,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     auto turns = turns_of(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, winner_coarse, scene_points,
                           scene_tree, free_space, coarse, fine, params, res, passes, taken);
     if (turns.better) {
-      w.icp = turns.better->icp;
-      w.T = turns.better->icp.T_target_source;
-      w.seen = turns.better->seen;
+      w.move_to(*turns.better);
       w.score = turns.better->coarse_score;
     }
     s.coarse_poses.insert(s.coarse_poses.end(), turns.coarse.begin(), turns.coarse.end());
