@@ -168,9 +168,12 @@ class FreeSpace {
     return check(model, T, [](const Check&) { return true; });
   }
   /// The same, measuring `continued` (two thirds of the work) only when `worth_it` holds for
-  /// the rest of the check (`continued` 0 then); else it is NaN, not measured.
+  /// the rest of the check (`continued` 0 then); else it is NaN, not measured. With more than
+  /// `most_through` of the model through a solid's face (measured first), nothing else is
+  /// measured: every other figure NaN, which no test passes.
   template <typename WorthIt>
-  Check check(const PointCloud& model, const Transform& T, const WorthIt& worth_it) const {
+  Check check(const PointCloud& model, const Transform& T, const WorthIt& worth_it,
+              double most_through = std::numeric_limits<double>::infinity()) const {
     Check c;
     std::vector<Eigen::Vector3d> p(model.points.size()), n(model.points.size());
 #pragma omp parallel for schedule(static)
@@ -201,6 +204,10 @@ class FreeSpace {
         }
         c.through = std::max(c.through, static_cast<double>(std::min(front, behind)) / static_cast<double>(p.size()));
       }
+    }
+    if (c.through > most_through) {
+      c.free_space = c.explained = c.occluded = c.planarity = c.continued = std::numeric_limits<double>::quiet_NaN();
+      return c;
     }
     if (maps_.empty()) return c;
     // 0: not known yet; 1: explained by the scene; 2: not (nothing near, or only a background plane).
@@ -1320,9 +1327,12 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
         // or turned on a box top) would be refused again: not refined.
         if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
-        // The silhouette is measured only for a pose that passes the screen's other tests.
+        // The screen's tests that need no check first: the overlap (the occlusion lowers what is
+        // required, down to the floor) and the share through a solid's face, measured first. The
+        // silhouette is measured only for a pose that passes the screen's other tests.
+        if (v.icp.overlap_fraction < promising.overlap * params.min_overlap_floor) continue;
         const auto screened = [&](const FreeSpace::Check& rest) { return meets(v.icp, rest, promising); };
-        if (!meets(v.icp, v.seen.emplace(free_space.check(model, v.T, screened)), promising)) continue;
+        if (!meets(v.icp, v.seen.emplace(free_space.check(model, v.T, screened, params.max_through_fraction)), promising)) continue;
         ++refined;
         if (v.icp.rmse_m > kRefinedRmse * params.max_rmse_factor * res) {
           // Its coarse figures stand for the refined pose's (below).

@@ -322,14 +322,15 @@ struct RecognitionCandidate {
   size_t model_index = 0;
   Transform T_scene_model = Transform::Identity();
   /// continued_fraction is NaN where not measured: a coarse pose refused by the screen before
-  /// the fine ICP on its other tests (the silhouette test is most of a check's work)
+  /// the fine ICP on its other tests (the silhouette test is most of a check's work); so are the
+  /// visibility figures of one refused for its share through a solid's face (measured first)
   double overlap_fraction = 0, rmse_m = 0, free_space_fraction = 0, visible_explained = 1, occluded_fraction = 0, continued_fraction = 0;
   double support_planarity = 0;   ///< 1: the scene surface it explains is one plane
   double through_fraction = 0;    ///< [1] share of it on the less of the two sides of a solid's face it goes through (max_through_fraction)
   size_t correspondences = 0;     ///< in its group; for a pair or voting hypothesis, the sampled model points it put on the scene
   enum class Source { grouping, pairs, voting, axis } source = Source::grouping;
   /// proposed: a pair or voting hypothesis in the pool that no coarse ICP refined; coarse: refined
-  /// by the coarse ICP only
+  /// by the coarse ICP only (not screened, or refused by the screen for its overlap alone)
   enum class Stage { proposed, coarse, refused, accepted } stage = Stage::coarse;
 };
 
