@@ -1324,13 +1324,13 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       for (size_t k = first; k < s.verified.size() && refined < static_cast<size_t>(std::max(params.max_candidates_verified, 0)); ++k) {
         auto& v = s.verified[k];
         v.origin->done = true;
+        // The screen's tests that need no check first: the overlap (the occlusion lowers what is
+        // required, down to the floor), then the share through a solid's face (the check's first
+        // measure). The silhouette is measured only for a pose that passes the screen's other tests.
+        if (v.icp.overlap_fraction < promising.overlap * params.min_overlap_floor) continue;
         // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
         // or turned on a box top) would be refused again: not refined.
         if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
-        // The screen's tests that need no check first: the overlap (the occlusion lowers what is
-        // required, down to the floor) and the share through a solid's face, measured first. The
-        // silhouette is measured only for a pose that passes the screen's other tests.
-        if (v.icp.overlap_fraction < promising.overlap * params.min_overlap_floor) continue;
         const auto screened = [&](const FreeSpace::Check& rest) { return meets(v.icp, rest, promising); };
         if (!meets(v.icp, v.seen.emplace(free_space.check(model, v.T, screened, params.max_through_fraction)), promising)) continue;
         ++refined;
