@@ -784,6 +784,13 @@ bool meets_tests(const IcpResult& icp, const FreeSpace::Check& seen, const Recog
          seen.through <= params.max_through_fraction;
 }
 
+// The tests on the ICP's own figures, which no check loosens: the residual, and the overlap floor
+// (what something hid lowers the required overlap to the floor, never below). A pose that fails
+// them fails `meets_tests` whatever its check: it needs none.
+bool may_pass(const IcpResult& icp, const RecognitionParams& params, double res) {
+  return icp.overlap_fraction >= params.min_overlap_floor && icp.rmse_m <= params.max_rmse_factor * res;
+}
+
 // A pose's figures as a tried pose (diagnosis); `seen` null where it was not checked.
 RecognitionCandidate candidate_of(size_t model_index, const Transform& T_scene_model, const IcpResult& icp, const FreeSpace::Check* seen) {
   RecognitionCandidate c;
@@ -885,6 +892,7 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t k = 0; k < turned.size(); ++k) {
     turned[k].icp = icp_point_to_plane(model, scene, scene_tree, turned[k].icp.T_target_source, fine);
+    if (!may_pass(turned[k].icp, params, res)) continue;
     turned[k].seen = free_space.check(model, turned[k].icp.T_target_source);
     ok[k] = passes(turned[k].icp, turned[k].seen);
   }
@@ -896,26 +904,32 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
 }
 
 // A straight pipe's pose (a model with a cylinder) slid along its axis by every whole number of
-// resolutions up to `steps` either way, each refined by the fine ICP; of those that pass every
+// resolutions up to axis_slide_steps either way, each refined by the fine ICP; of those that pass every
 // test (`passes`), the one with the most of the model on the scene less its share in free
 // space, or none. Point-to-plane ICP hardly holds a pipe's place along its axis (only its rims
 // do): a pose a few millimetres short of the seen end leaves the scene's pipe carrying on past
 // the model's outline, one beyond it puts the end in free space.
 template <typename Passes>
 std::optional<Moved> slid_along_axis(const PointCloud& model, const detail::ModelCylinder& cylinder, const Transform& T_scene_model, const PointCloud& scene,
-                                     const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine, int steps, double res, const Passes& passes) {
-  if (steps < 1) return std::nullopt;
-  std::vector<Moved> slid(2 * static_cast<size_t>(steps));
+                                     const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params,
+                                     double res, const Passes& passes) {
+  if (params.axis_slide_steps < 1) return std::nullopt;
+  std::vector<Moved> slid(2 * static_cast<size_t>(params.axis_slide_steps));
+  std::vector<char> ok(slid.size(), 0);
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t k = 0; k < slid.size(); ++k) {
     const int shift = (k % 2 ? -1 : 1) * static_cast<int>(k / 2 + 1);
     const Transform T = T_scene_model * Eigen::Translation3d(cylinder.direction * (shift * res));
     slid[k].icp = icp_point_to_plane(model, scene, scene_tree, T, fine);
+    if (!may_pass(slid[k].icp, params, res)) continue;
     slid[k].seen = free_space.check(model, slid[k].icp.T_target_source);
+    ok[k] = passes(slid[k].icp, slid[k].seen);
   }
   std::optional<Moved> best;
-  for (const auto& m : slid)
-    if (passes(m.icp, m.seen) && (!best || m.icp.overlap_fraction - m.seen.free_space > best->icp.overlap_fraction - best->seen.free_space)) best = m;
+  for (size_t k = 0; k < slid.size(); ++k) {
+    const auto& m = slid[k];
+    if (ok[k] && (!best || m.icp.overlap_fraction - m.seen.free_space > best->icp.overlap_fraction - best->seen.free_space)) best = m;
+  }
   return best;
 }
 
@@ -1346,7 +1360,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
         // what keeps the pose from passing.
         if (const auto* cylinder = library.cylinder(s.m); cylinder && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, near_passing))
-          if (auto slid = slid_along_axis(model, *cylinder, v.T, scene_points, scene_tree, free_space, fine, params.axis_slide_steps, res, passes))
+          if (auto slid = slid_along_axis(model, *cylinder, v.T, scene_points, scene_tree, free_space, fine, params, res, passes))
             v.move_to(*slid);
         // A part the ICP fits to the scene (its overlap and residual pass) that the visibility tests
         // refuse may lie at the right place turned wrong about its run: a tee's branch or a valve's
@@ -1392,14 +1406,17 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         v.origin->done = true;
         v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
         v.T = v.icp.T_target_source;
+        v.seen.reset();
+        if (!may_pass(v.icp, params, res)) continue;
         v.seen.emplace(free_space.check(model, v.T));
         ok[j] = passes(v.icp, *v.seen);
       }
       double to_beat = w.icp.overlap_fraction - w.seen->free_space + params.rival_margin;
       for (size_t j = 0; j < rivals.size(); ++j) {
+        if (!ok[j]) continue;
         const auto& v = s.verified[rivals[j]];
         const double score = v.icp.overlap_fraction - v.seen->free_space;
-        if (ok[j] && score > to_beat && !taken(v.T)) to_beat = score, s.winner = rivals[j];
+        if (score > to_beat && !taken(v.T)) to_beat = score, s.winner = rivals[j];
       }
       if (*s.winner != first_winner) winner_coarse = coarse_overlap(s.verified[*s.winner].T);
     }

@@ -329,8 +329,9 @@ struct RecognitionCandidate {
   double through_fraction = 0;    ///< [1] share of it on the less of the two sides of a solid's face it goes through (max_through_fraction)
   size_t correspondences = 0;     ///< in its group; for a pair or voting hypothesis, the sampled model points it put on the scene
   enum class Source { grouping, pairs, voting, axis } source = Source::grouping;
-  /// proposed: a pair or voting hypothesis in the pool that no coarse ICP refined; coarse: refined
-  /// by the coarse ICP only (not screened, or refused by the screen for its overlap alone)
+  /// proposed: a pair or voting hypothesis in the pool that no coarse ICP refined; coarse: not
+  /// checked at its pose (refined by the coarse ICP only; refused by the screen for its overlap
+  /// alone; or a rival whose fine ICP failed the residual or the overlap floor)
   enum class Stage { proposed, coarse, refused, accepted } stage = Stage::coarse;
 };
 
