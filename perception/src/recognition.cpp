@@ -786,9 +786,9 @@ bool meets_tests(const IcpResult& icp, const FreeSpace::Check& seen, const Recog
 
 // The tests on the ICP's own figures, which no check loosens: the residual, and the overlap floor
 // (what something hid lowers the required overlap to the floor, never below). A pose that fails
-// them fails `meets_tests` whatever its check: it needs none.
-bool may_pass(const IcpResult& icp, const RecognitionParams& params, double res) {
-  return icp.overlap_fraction >= params.min_overlap_floor && icp.rmse_m <= params.max_rmse_factor * res;
+// them fails `meets_tests` (with the same slack) whatever its check: it needs none.
+bool may_pass(const IcpResult& icp, const RecognitionParams& params, double res, const Slack& slack = {}) {
+  return icp.overlap_fraction >= slack.overlap * params.min_overlap_floor && icp.rmse_m <= slack.rmse * params.max_rmse_factor * res;
 }
 
 // A pose's figures as a tried pose (diagnosis); `seen` null where it was not checked.
@@ -852,9 +852,25 @@ IcpSettings fine_icp(double res) {
 // A pose moved from another (turned about an axis, slid along one), refined and checked.
 struct Moved {
   IcpResult icp;
-  FreeSpace::Check seen;
+  FreeSpace::Check seen;    ///< when checked
+  bool checked = false;     ///< false: its ICP alone failed (may_pass), no check needed
+  bool passed = false;      ///< it passes every test
   double coarse_score = 0;  ///< of its coarse pose (turns)
 };
+
+// The model refined by the fine ICP from T_scene_model, and checked there unless the ICP's own
+// figures already fail.
+template <typename Passes>
+Moved refined_from(const PointCloud& model, const Transform& T_scene_model, const PointCloud& scene, const KdTree3& scene_tree,
+                   const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params, double res, const Passes& passes) {
+  Moved m;
+  m.icp = icp_point_to_plane(model, scene, scene_tree, T_scene_model, fine);
+  if (!may_pass(m.icp, params, res)) return m;
+  m.seen = free_space.check(model, m.icp.T_target_source);
+  m.checked = true;
+  m.passed = passes(m.icp, m.seen);
+  return m;
+}
 
 // A pose of the model turned from T_scene_model about one of its turn axes (RecognitionParams::
 // turn_steps) that passes every test (`passes`, and not on an accepted instance: `taken`) and
@@ -888,17 +904,15 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
   std::erase_if(turned, [&](const Moved& t) { return t.icp.overlap_fraction <= coarse_overlap + params.turn_margin; });
   std::sort(turned.begin(), turned.end(), [](const Moved& a, const Moved& b) { return a.icp.overlap_fraction > b.icp.overlap_fraction; });
   if (turned.size() > 3) turned.resize(3);
-  std::vector<char> ok(turned.size(), 0);
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t k = 0; k < turned.size(); ++k) {
-    turned[k].icp = icp_point_to_plane(model, scene, scene_tree, turned[k].icp.T_target_source, fine);
-    if (!may_pass(turned[k].icp, params, res)) continue;
-    turned[k].seen = free_space.check(model, turned[k].icp.T_target_source);
-    ok[k] = passes(turned[k].icp, turned[k].seen);
+    const double coarse_score = turned[k].coarse_score;
+    turned[k] = refined_from(model, turned[k].icp.T_target_source, scene, scene_tree, free_space, fine, params, res, passes);
+    turned[k].coarse_score = coarse_score;
   }
-  for (size_t k = 0; k < turned.size(); ++k) {
-    const double s = turned[k].icp.overlap_fraction - turned[k].seen.free_space;
-    if (ok[k] && s > score + params.turn_margin && !taken(turned[k].icp.T_target_source)) score = s, out.better = turned[k];
+  for (const auto& t : turned) {
+    const double s = t.icp.overlap_fraction - t.seen.free_space;
+    if (t.passed && s > score + params.turn_margin && !taken(t.icp.T_target_source)) score = s, out.better = t;
   }
   return out;
 }
@@ -915,21 +929,15 @@ std::optional<Moved> slid_along_axis(const PointCloud& model, const detail::Mode
                                      double res, const Passes& passes) {
   if (params.axis_slide_steps < 1) return std::nullopt;
   std::vector<Moved> slid(2 * static_cast<size_t>(params.axis_slide_steps));
-  std::vector<char> ok(slid.size(), 0);
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t k = 0; k < slid.size(); ++k) {
     const int shift = (k % 2 ? -1 : 1) * static_cast<int>(k / 2 + 1);
-    const Transform T = T_scene_model * Eigen::Translation3d(cylinder.direction * (shift * res));
-    slid[k].icp = icp_point_to_plane(model, scene, scene_tree, T, fine);
-    if (!may_pass(slid[k].icp, params, res)) continue;
-    slid[k].seen = free_space.check(model, slid[k].icp.T_target_source);
-    ok[k] = passes(slid[k].icp, slid[k].seen);
+    slid[k] = refined_from(model, T_scene_model * Eigen::Translation3d(cylinder.direction * (shift * res)), scene, scene_tree, free_space, fine,
+                           params, res, passes);
   }
   std::optional<Moved> best;
-  for (size_t k = 0; k < slid.size(); ++k) {
-    const auto& m = slid[k];
-    if (ok[k] && (!best || m.icp.overlap_fraction - m.seen.free_space > best->icp.overlap_fraction - best->seen.free_space)) best = m;
-  }
+  for (const auto& m : slid)
+    if (m.passed && (!best || m.icp.overlap_fraction - m.seen.free_space > best->icp.overlap_fraction - best->seen.free_space)) best = m;
   return best;
 }
 
@@ -1210,11 +1218,13 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     size_t size;
     std::optional<FreeSpace::Check> seen;  ///< once screened or refined
     PoseHypothesis* origin;                ///< the hypothesis it came from
-    /// Moved to a pose found from it (slid along its axis, turned), refined and checked there.
+    /// Moved to a pose refined from it (slid along its axis, turned, or itself), and checked there
+    /// unless its ICP alone failed.
     void move_to(const Moved& moved) {
       icp = moved.icp;
       T = moved.icp.T_target_source;
-      seen = moved.seen;
+      if (moved.checked) seen = moved.seen;
+      else seen.reset();
     }
   };
   // A model's search for its next instance, kept between rounds.
@@ -1235,10 +1245,13 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     /// a pose of it refused because what it lies on is one plane or carries on past its outline.
     std::vector<char> unusable;
   };
-  // A pose refused because what it lies on is one plane, or carries on past its outline: the scene
-  // surface under it, and when that is mostly one plane, the plane as far as the model reaches,
-  // no longer support the model (its face would slide or turn there).
-  const auto refused_on_plane = [&](Search& s, const Transform& T_scene_model, double planarity) {
+  // A pose whose check finds that what it lies on is one plane, or carries on past its outline
+  // (refused for it; with drop_refused_planes): the scene surface under it, and when that is mostly
+  // one plane, the plane as far as the model reaches, no longer support the model (its face would
+  // slide or turn there).
+  const auto refused_on_plane = [&](Search& s, const Transform& T_scene_model, const FreeSpace::Check& seen) {
+    if (!params.drop_refused_planes || !(seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction)) return;
+    const double planarity = seen.planarity;
     const auto on = lies_on(library.model_points(s.m), T_scene_model);
     for (const size_t p : on) s.unusable[p] = 1;
     if (planarity < 0.85) return;
@@ -1341,7 +1354,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         // The screen's tests that need no check first: the overlap (the occlusion lowers what is
         // required, down to the floor), then the share through a solid's face (the check's first
         // measure). The silhouette is measured only for a pose that passes the screen's other tests.
-        if (v.icp.overlap_fraction < promising.overlap * params.min_overlap_floor) continue;
+        if (!may_pass(v.icp, params, res, promising)) continue;
         // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
         // or turned on a box top) would be refused again: not refined.
         if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
@@ -1349,9 +1362,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         if (!meets(v.icp, v.seen.emplace(free_space.check(model, v.T, screened, params.max_through_fraction)), promising)) continue;
         ++refined;
         if (v.icp.rmse_m > kRefinedRmse * params.max_rmse_factor * res) {
-          // Its coarse figures stand for the refined pose's (below).
-          if (params.drop_refused_planes && (v.seen->planarity > params.max_support_planarity || v.seen->continued > params.max_continued_fraction))
-            refused_on_plane(s, v.T, v.seen->planarity);
+          refused_on_plane(s, v.T, *v.seen);  // its coarse figures stand for the refined pose's (below)
           continue;
         }
         v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
@@ -1375,8 +1386,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
           if (turns.better && turns.better->seen.occluded < 0.5) v.move_to(*turns.better);
         }
         const auto& seen = *v.seen;
-        if (params.drop_refused_planes && (seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction))
-          refused_on_plane(s, v.T, seen.planarity);
+        refused_on_plane(s, v.T, seen);
         if (!passes(v.icp, seen) || taken(v.T)) continue;
         s.winner = k;
         break;
@@ -1404,12 +1414,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       for (size_t j = 0; j < rivals.size(); ++j) {
         auto& v = s.verified[rivals[j]];
         v.origin->done = true;
-        v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
-        v.T = v.icp.T_target_source;
-        v.seen.reset();
-        if (!may_pass(v.icp, params, res)) continue;
-        v.seen.emplace(free_space.check(model, v.T));
-        ok[j] = passes(v.icp, *v.seen);
+        const Moved refined = refined_from(model, v.T, scene_points, scene_tree, free_space, fine, params, res, passes);
+        v.move_to(refined);
+        ok[j] = refined.passed;
       }
       double to_beat = w.icp.overlap_fraction - w.seen->free_space + params.rival_margin;
       for (size_t j = 0; j < rivals.size(); ++j) {
