@@ -4,10 +4,11 @@
 // parameters were tuned on the first 50, and the other 50 are reported apart as held out), each
 // with 3 to 8 instances of the five pipework library parts and 2 to 5 distractors (boxes and
 // cylinders), dropped with physics into piles, seen by one simulated Minolta Vivid 700 from a
-// random azimuth. The ground truth gives each instance's pose and visible fraction (visible / unoccluded pixels, so occlusion = 1 - visible fraction; the
-// unoccluded pixels are counted on an image plane wider than the frame, so what the frame cuts
-// off counts as occluded: the tables are in view, but a pipe may reach beyond the frame; the
-// visible ones are those the scanner measures, so a part in its laser's shadow - fallen to the
+// random azimuth. The ground truth gives each instance's pose and visible fraction (visible /
+// unoccluded pixels, so occlusion = 1 - visible fraction; the unoccluded pixels are counted on
+// an image plane wider than the frame, so what the frame cuts off counts as occluded: the
+// tables are in view, but a pipe may reach beyond the frame; the visible ones are those the
+// scanner measures, so a part in its laser's shadow - fallen to the
 // floor below the table's near edge - or a face met by its rays beyond 80 degrees of incidence,
 // where it never returns anything - a flange seen edge-on - is occluded however plainly the
 // camera sees it).
@@ -472,8 +473,9 @@ int main(int argc, char** argv) {
       if (at_true_pose(i.model, i.T_scene_model)) ++ambiguous_right;
       else ++ambiguous_false, ambiguous_alternative_right += at_true_pose(i.model, i.T_scene_model_alternative);
     }
-    ours_all.add(scored(ours_truth), fp, t_ours);
-    ours_split[s < kTunedScenes ? 0 : 1].add(scored(ours_truth), fp, t_ours);
+    const auto ours_scored = scored(ours_truth);
+    ours_all.add(ours_scored, fp, t_ours);
+    ours_split[s < kTunedScenes ? 0 : 1].add(ours_scored, fp, t_ours);
     if (diagnose) {
       const auto ambiguity = [&](const RecognizedInstance& i) {
         if (!i.ambiguous) return std::string();
@@ -645,8 +647,9 @@ int main(int argc, char** argv) {
       const double t_ppf = since(t0);
       auto ppf_truth = truth;
       const int pfp = score(ppf_truth, theirs, by_name);
-      ppf_all.add(scored(ppf_truth), pfp, t_ppf);
-      ppf_split[s < kTunedScenes ? 0 : 1].add(scored(ppf_truth), pfp, t_ppf);
+      const auto ppf_scored = scored(ppf_truth);
+      ppf_all.add(ppf_scored, pfp, t_ppf);
+      ppf_split[s < kTunedScenes ? 0 : 1].add(ppf_scored, pfp, t_ppf);
       scene_j["ppf"] = {{"detections", theirs.size()}, {"false_positives", pfp}, {"seconds", t_ppf}};
     }
     scenes.push_back(scene_j);
@@ -657,13 +660,12 @@ int main(int argc, char** argv) {
   json out;
   out["scenes"] = scored_scenes;
   out["criteria"] = "strict: 5 deg and 5 mm; symmetric: every model point within 10% of the diameter of the model surface at the true pose";
-  // Each detector over all scenes, then over those the parameters were tuned on and those held out.
+  // Each detector over all scenes, then over those the parameters were tuned on and those held
+  // out (each part only when it has scenes).
   const auto split_report = [](const Tally& all, const std::array<Tally, 2>& split) {
     json r = all.report();
-    r["tuned_on"] = split[0].report();
-    r["tuned_on"]["range"] = "scenes 0-" + std::to_string(kTunedScenes - 1);
-    r["held_out"] = split[1].report();
-    r["held_out"]["range"] = "scenes from " + std::to_string(kTunedScenes);
+    if (split[0].scenes > 0) r["tuned_on"] = split[0].report(), r["tuned_on"]["range"] = "scenes 0-" + std::to_string(kTunedScenes - 1);
+    if (split[1].scenes > 0) r["held_out"] = split[1].report(), r["held_out"]["range"] = "scenes from " + std::to_string(kTunedScenes);
     return r;
   };
   out["artisan_spin_images"] = split_report(ours_all, ours_split);

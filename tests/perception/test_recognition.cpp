@@ -806,7 +806,8 @@ TEST(Recognition, APoseTwoPercentThroughTheTableTopIsNoInstance) {
 TEST(Recognition, ARefusedPoseIsTriedTurned) {
   RecognitionParams without;
   without.refused_turns = 0;
-  expect_found_only_with("clutter-scene18", "tee#1", {"tee#1", "elbow_90#1", "elbow_90#2", "elbow_90#3"}, "turning refused poses", without, {}, chosen_voting());
+  expect_found_only_with("clutter-scene18", "tee#1", {"tee#1", "elbow_90#1", "elbow_90#2", "elbow_90#3"}, "turning refused poses", without, {},
+                         chosen_voting());
 }
 }  // namespace
 }  // namespace artisan
