@@ -906,9 +906,9 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
   if (turned.size() > 3) turned.resize(3);
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t k = 0; k < turned.size(); ++k) {
-    const double coarse_score = turned[k].coarse_score;
-    turned[k] = refined_from(model, turned[k].icp.T_target_source, scene, scene_tree, free_space, fine, params, res, passes);
-    turned[k].coarse_score = coarse_score;
+    Moved refined = refined_from(model, turned[k].icp.T_target_source, scene, scene_tree, free_space, fine, params, res, passes);
+    refined.coarse_score = turned[k].coarse_score;  // the coarse pose's, which the winner keeps as its score
+    turned[k] = refined;
   }
   for (const auto& t : turned) {
     const double s = t.icp.overlap_fraction - t.seen.free_space;
@@ -1198,8 +1198,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // A coarse pose far from passing is refused without the fine ICP, which moves a pose by a
   // fraction of a resolution (on the clutter bench's first 12 scenes this screen let through all
   // 48 coarse poses that went on to pass, and stopped 482 of the 688 that failed).
-  constexpr double kAnyShare = std::numeric_limits<double>::infinity();
-  const Slack promising{.overlap = 0.5, .rmse = kAnyShare, .free_space = 2, .explained = 0.15, .planarity = 0.03, .continued = 3};
+  constexpr double kUnlimited = std::numeric_limits<double>::infinity();  // a slack that lifts its test
+  const Slack promising{.overlap = 0.5, .rmse = kUnlimited, .free_space = 2, .explained = 0.15, .planarity = 0.03, .continued = 3};
   // A screened pose whose coarse residual is more than this many times the limit is refused as
   // refined, without the fine ICP: in 50 scenes the coarse residual of the 219 poses that passed
   // after the fine ICP was at most 1.8 times the limit (1.2 mm), while 1,900 of the 2,283 fine
@@ -1210,7 +1210,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   const Slack near_passing{.free_space = 2, .explained = 0.1, .continued = 3};
   // Fits the scene (overlap, residual), whatever the free-space and seen-surface tests say (the
   // plane, silhouette and through tests still hold).
-  const Slack fits_only{.free_space = kAnyShare, .explained = kAnyShare};
+  const Slack fits_only{.free_space = kUnlimited, .explained = kUnlimited};
   struct Verified {
     Transform T;
     IcpResult icp;
