@@ -941,6 +941,45 @@ std::optional<Moved> slid_along_axis(const PointCloud& model, const detail::Mode
   return best;
 }
 
+// A straight pipe's winning pose slid along its axis by every axis step up to half its length
+// either way, where the whole seen pipe could lie (when both its ends are hidden, the ICP and
+// the tests leave its place along the run open): of the slides that put about as much of the
+// model on the scene (the fine ICP's figures at the slid pose, less rival_coarse_slack), the
+// one with the most on the scene less its share in free space, refined; it replaces the winner
+// when it passes and scores more than `score` by rival_margin. A pipe that carries on into space
+// the sensor saw through is wrong however well its seen part fits.
+template <typename Passes, typename Taken>
+std::optional<Moved> best_slide(const PointCloud& model, const detail::ModelCylinder& cylinder, const Transform& T_scene_model, double overlap,
+                                double score, const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space,
+                                const IcpSettings& fine, const RecognitionParams& params, double res, const Passes& passes, const Taken& taken) {
+  const double step = params.axis_step_factor * res;
+  const auto steps = static_cast<int>(0.5 * (cylinder.end - cylinder.start) / step);
+  if (!params.winner_slides || steps < 1) return std::nullopt;
+  IcpSettings at_pose = fine;
+  at_pose.max_iterations = 1;  // its overlap is that of the pose it starts from
+  struct Slide {
+    Transform T;
+    double score = -std::numeric_limits<double>::infinity();
+  };
+  std::vector<Slide> slides(2 * static_cast<size_t>(steps));
+#pragma omp parallel for schedule(dynamic, 4)
+  for (size_t k = 0; k < slides.size(); ++k) {
+    const int shift = (k % 2 ? -1 : 1) * static_cast<int>(k / 2 + 1);
+    Slide& slide = slides[k];
+    slide.T = T_scene_model * Eigen::Translation3d(cylinder.direction * (shift * step));
+    const double on_scene = icp_point_to_plane(model, scene, scene_tree, slide.T, at_pose).overlap_fraction;
+    if (on_scene < overlap - params.rival_coarse_slack) continue;
+    // Its share in free space alone: the seen surface carried on past it is not measured.
+    slide.score = on_scene - free_space.check(model, slide.T, [](const FreeSpace::Check&) { return false; }).free_space;
+  }
+  const auto best = std::max_element(slides.begin(), slides.end(), [](const Slide& a, const Slide& b) { return a.score < b.score; });
+  if (best == slides.end() || !(best->score > score + params.rival_margin)) return std::nullopt;
+  Moved moved = refined_from(model, best->T, scene, scene_tree, free_space, fine, params, res, passes);
+  if (!moved.passed || !(moved.icp.overlap_fraction - moved.seen.free_space > score + params.rival_margin) || taken(moved.icp.T_target_source))
+    return std::nullopt;
+  return moved;
+}
+
 }  // namespace
 
 struct SpinImageLibrary::SearchIndex {
@@ -1426,6 +1465,14 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         if (score > to_beat && !taken(v.T)) to_beat = score, s.winner = rivals[j];
       }
       if (*s.winner != first_winner) winner_coarse = coarse_overlap(s.verified[*s.winner].T);
+    }
+    if (const auto* cylinder = library.cylinder(s.m)) {
+      auto& w = s.verified[*s.winner];
+      if (auto slid = best_slide(model, *cylinder, w.T, w.icp.overlap_fraction, w.icp.overlap_fraction - w.seen->free_space, scene_points, scene_tree,
+                                 free_space, fine, params, res, passes, taken)) {
+        w.move_to(*slid);
+        winner_coarse = coarse_overlap(w.T);
+      }
     }
     // A part whose distinguishing piece is small (a valve's stem and hand wheel, a tee's branch)
     // also fits the scene with its large, nearly symmetric body (the run) turned about its axis

@@ -272,6 +272,10 @@ struct RecognitionParams {
   /// positives against 188 and 12 without rivals (a valve turned about its run, two pipes slid);
   /// 1 rival: 189 and 11; 6: 190 and 10.
   int rivals = 3;
+  /// A straight pipe's winner (a model with a cylinder) is also tried slid along its axis by
+  /// every axis step up to half its length either way; the slide that scores most (as a rival
+  /// does), refined, takes its place when it passes and scores more by rival_margin.
+  bool winner_slides = true;
   double rival_coarse_slack = 0.01;  ///< [1]
   /// [1] 0.003 also took a tee's true pose back from one turned 180 degrees (scene 6), but lost
   /// a pipe to one slid 38 mm along its axis (scene 22)
