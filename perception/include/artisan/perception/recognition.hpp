@@ -274,7 +274,10 @@ struct RecognitionParams {
   int rivals = 3;
   /// A straight pipe's winner (a model with a cylinder) is also tried slid along its axis by
   /// every axis step up to half its length either way; the slide that scores most (as a rival
-  /// does), refined, takes its place when it passes and scores more by rival_margin.
+  /// does), refined, takes its place when it passes and scores more by rival_margin. With both
+  /// ends hidden a pipe fits its seen part anywhere along the run that covers it, and a place
+  /// partly in seen free space (under the limit) passes. Clutter bench, 100 scenes: 395 of 423
+  /// found below 70% occlusion with 13 false positives, against 392 and 15 without.
   bool winner_slides = true;
   double rival_coarse_slack = 0.01;  ///< [1]
   /// [1] 0.003 also took a tee's true pose back from one turned 180 degrees (scene 6), but lost
