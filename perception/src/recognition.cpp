@@ -973,7 +973,7 @@ std::optional<Moved> best_slide(const PointCloud& model, const detail::ModelCyli
     slide.score = on_scene - free_space.check(model, slide.T, [](const FreeSpace::Check&) { return false; }).free_space;
   }
   const auto best = std::max_element(slides.begin(), slides.end(), [](const Slide& a, const Slide& b) { return a.score < b.score; });
-  if (best == slides.end() || !(best->score > score + params.rival_margin)) return std::nullopt;
+  if (!(best->score > score + params.rival_margin)) return std::nullopt;  // steps >= 1: there are slides
   Moved moved = refined_from(model, best->T, scene, scene_tree, free_space, fine, params, res, passes);
   if (!moved.passed || !(moved.icp.overlap_fraction - moved.seen.free_space > score + params.rival_margin) || taken(moved.icp.T_target_source))
     return std::nullopt;

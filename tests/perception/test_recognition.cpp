@@ -717,9 +717,9 @@ TEST(Recognition, APipeRefusedShortOfItsEndIsSlidAlongItsAxis) {
 // default. Without them the pipe must be missed ("found" 57 mm along its axis, a false positive;
 // the test fails if it is found, as the scene would no longer test the rivals); with them it must
 // be found at its pose (MSSD within 10% of the diameter), and every instance must be a true one.
-// Both without the winner's slides (RecognitionParams::winner_slides), which find it as well.
 TEST(Recognition, ARivalThatFitsBetterTakesTheWinnersPlace) {
-  // The rivals alone: the winner's slides along its axis (below) find this pipe too.
+  // The rivals alone: the winner's slides along its axis (RecognitionParams::winner_slides,
+  // below) find this pipe too.
   RecognitionParams with;
   with.winner_slides = false;
   RecognitionParams without = with;
