@@ -418,8 +418,8 @@ int main(int argc, char** argv) {
   Tally ours_all, ppf_all;
   std::array<Tally, 2> ours_split, ppf_split;  // tuned on, held out
   int scored_scenes = 0;
-  // Detections flagged ambiguous (another pose fits about as well): right ones, false ones, and
-  // false ones whose alternative pose is the right one.
+  // Detections flagged ambiguous (another pose or model fits about as well): right ones, false
+  // ones, and false ones whose alternative (model and pose) is the right one.
   int ambiguous_right = 0, ambiguous_false = 0, ambiguous_alternative_right = 0;
   double sim_s = 0;
   json scenes = json::array();
@@ -472,7 +472,7 @@ int main(int argc, char** argv) {
     for (const auto& i : result.instances) {
       if (!i.ambiguous) continue;
       if (at_true_pose(i.model, i.T_scene_model)) ++ambiguous_right;
-      else ++ambiguous_false, ambiguous_alternative_right += at_true_pose(i.model, i.T_scene_model_alternative);
+      else ++ambiguous_false, ambiguous_alternative_right += at_true_pose(i.alternative_model, i.T_scene_model_alternative);
     }
     const auto ours_scored = scored(ours_truth);
     ours_all.add(ours_scored, fp, t_ours);
@@ -480,6 +480,9 @@ int main(int argc, char** argv) {
     if (diagnose) {
       const auto ambiguity = [&](const RecognizedInstance& i) {
         if (!i.ambiguous) return std::string();
+        if (i.alternative_model != i.model)
+          return " (ambiguous: " + i.alternative_model + (at_true_pose(i.alternative_model, i.T_scene_model_alternative) ? ", at a true one," : "") +
+                 " fits the same surface)";
         const double d = symmetric_distance(*by_name.at(i.model), i.T_scene_model, i.T_scene_model_alternative);
         return " (ambiguous: the alternative " + std::to_string(int(std::lround(100 * d))) + "% of the diameter away)";
       };

@@ -206,6 +206,12 @@ void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& 
             list.push_back({{"id", f.id}, {"path", ws.get(f.id).path}, {"model", f.model}, {"T_scene_model", to_row_major(f.T_scene_model)},
                             {"score", f.figures["score"]}, {"overlap", f.figures["overlap"]}, {"rmse_m", f.figures["rmse_m"]},
                             {"ambiguous", f.figures["ambiguous"]}});
+          for (auto& i : list)  // the alternative: another pose of the model, or another model on the same surface
+            if (i["ambiguous"].get<bool>()) {
+              const json md = ws.get(i["id"].get<worldmodel::ObjectId>()).metadata;
+              i["alternative_model"] = md.at("figures").at("alternative_model");
+              i["T_scene_model_alternative"] = md.at("T_scene_model_alternative");
+            }
           results.push_back({{"scene", scene.path}, {"instances", list}});
           progress.update(results.size(), scene.path + ": " + std::to_string(found.size()) + " found");
         }
@@ -219,7 +225,10 @@ void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& 
           for (const auto& f : r["instances"])
             std::cerr << "found " << f["model"].get<std::string>() << " in " << scene << ": " << f["path"].get<std::string>() << ", overlap "
                       << f["overlap"].get<double>() << ", residual " << f["rmse_m"].get<double>() * 1e3 << " mm"
-                      << (f["ambiguous"].get<bool>() ? " (ambiguous: another pose fits almost as well)" : "") << "\n";
+                      << (!f["ambiguous"].get<bool>()                       ? ""
+                          : f["alternative_model"].get<std::string>() == f["model"].get<std::string>() ? " (ambiguous: another pose fits almost as well)"
+                          : " (ambiguous: " + f["alternative_model"].get<std::string>() + " fits the same surface almost as well)")
+                      << "\n";
         }
       }
       return 0;

@@ -136,7 +136,7 @@ void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& ac
         if (i.kind == "environment") std::cout << "environment, " << i.mesh.n_triangles << " triangles\n";
         else
           std::cout << i.model << " at " << where(obj.T_world_object) << ", " << i.status << ", score " << std::setprecision(3) << i.score
-                    << ", " << obj.T_world_grasps.size() << " grasp(s)" << (i.ambiguous ? ", AMBIGUOUS (symmetric)" : "")
+                    << ", " << obj.T_world_grasps.size() << " grasp(s)" << (i.ambiguous ? ", AMBIGUOUS (another pose or model fits as well)" : "")
                     << (i.attached_to.empty() ? "" : ", attached to " + i.attached_to) << "\n";
       }
       for (const auto& r : s.client.robots()) {

@@ -1560,6 +1560,25 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     found.visible_explained = top.seen->explained;
     found.occluded_fraction = top.seen->occluded;
     found.continued_fraction = top.seen->continued;
+    // Ambiguous with another model: its search's winner (which passes the tests and lies on no
+    // accepted instance) explains nearly all of the scene surface this one newly explains; the one
+    // that explains most of it. A tee whose branch is hidden and a pipe on its run are told apart
+    // by nothing the sensor saw.
+    {
+      std::vector<char> gained(scene_points.points.size(), 0);
+      for (const size_t p : next->gain) gained[p] = 1;
+      size_t most = 0;
+      for (const auto& other : searches) {
+        if (&other == next || !other.winner) continue;
+        const auto shared = static_cast<size_t>(std::count_if(other.gain.begin(), other.gain.end(), [&](size_t p) { return gained[p] != 0; }));
+        if (shared <= most || static_cast<double>(shared) < (1 - params.ambiguity_margin) * static_cast<double>(next->gain.size())) continue;
+        most = shared;
+        found.ambiguous = true;
+        found.alternative_model = library.model_name(other.m);
+        found.alternative_model_index = other.m;
+        found.T_scene_model_alternative = other.verified[*other.winner].T;
+      }
+    }
     // Ambiguous: another pose at the same place that puts the model's surface elsewhere (not a
     // turn about the part's own symmetry) puts nearly as much of the model on the scene (coarse
     // ICP overlap) and passes the tests too; the best of the first three such.
@@ -1577,6 +1596,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       const Transform& T = rivals[k]->T_target_source;
       if (passes(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model, T)) {
         found.ambiguous = true;
+        found.alternative_model = found.model;
+        found.alternative_model_index = found.model_index;
         found.T_scene_model_alternative = T;
       }
     }

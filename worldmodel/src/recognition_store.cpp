@@ -160,7 +160,9 @@ std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id,
                            {"turn_steps", params.turn_steps},
                            {"refused_turns", params.refused_turns},
                            {"rivals", params.rivals},
-                           {"rival_margin", params.rival_margin}};
+                           {"rival_margin", params.rival_margin},
+                           {"max_shared_support", params.max_shared_support},
+                           {"ambiguity_margin", params.ambiguity_margin}};
   std::vector<RecognizedObject> out;
   ws.write([&] {
     std::map<std::string, int> count;
@@ -169,8 +171,15 @@ std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id,
       json figures = {{"overlap", inst.overlap_fraction}, {"rmse_m", inst.rmse_m},        {"score", inst.score},
                       {"correspondences", inst.correspondences}, {"ambiguous", inst.ambiguous},
                       {"free_space", inst.free_space_fraction}, {"visible_explained", inst.visible_explained}};
+      // The alternative, when ambiguous: another pose of this model, or another model on the same surface.
+      const auto& alternative = model_info[inst.alternative_model_index];
+      if (inst.ambiguous) figures["alternative_model"] = alternative.name;
       json metadata = {{"model", model.path}, {"model_id", model.id}, {"T_scene_model", to_row_major(inst.T_scene_model)}, {"figures", figures}};
-      if (inst.ambiguous) metadata["T_scene_model_alternative"] = to_row_major(inst.T_scene_model_alternative);
+      if (inst.ambiguous) {
+        metadata["T_scene_model_alternative"] = to_row_major(inst.T_scene_model_alternative);
+        metadata["alternative_model"] = alternative.path;
+        metadata["alternative_model_id"] = alternative.id;
+      }
       if (model.metadata.contains("T_model_grasps")) {
         json grasps = json::array();
         for (const auto& g : model.metadata["T_model_grasps"]) {

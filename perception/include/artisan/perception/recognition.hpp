@@ -191,7 +191,8 @@ struct RecognitionParams {
   double max_shared_support = 0.3;
   /// [1] a different pose at the same place (RecognizedInstance::ambiguous) that puts at least
   /// 1 - ambiguity_margin of the found one's share of the model on the scene, and passes the
-  /// tests, is an ambiguity
+  /// tests, is an ambiguity; so is another model's pose that passes the tests and explains at
+  /// least 1 - ambiguity_margin of the scene surface the found one newly explains
   double ambiguity_margin = 0.1;
   /// Where the sensors that saw the scene were, in the scene frame (one view for a single scan,
   /// one per merged scan). With views, a pose is refused when more than
@@ -319,13 +320,17 @@ struct RecognizedInstance {
   double visible_explained = 1.0;    ///< [1] share of the model surface the sensors should have seen, and nothing hid, that they saw
   double occluded_fraction = 0.0;    ///< [1] share of the model surface the sensors should have seen that something hid
   double continued_fraction = 0.0;   ///< [1] share of the explained surface the scene continues past the model's outline
-  /// Another pose that puts the model's surface elsewhere (somewhere more than a tenth of its
+  /// Another model explains about the same scene surface (ambiguity_margin) and passes the
+  /// visibility tests (a pipe on the run of a tee whose branch is hidden); or, failing that,
+  /// another pose that puts the model's surface elsewhere (somewhere more than a tenth of its
   /// diameter from it; a turn about the part's own symmetry, a flange's about its axis, is the same
   /// surface) fits the scene almost as well (ambiguity_margin) and passes the visibility tests: a
   /// coarse pose of the search at the same place, or a turn about one of its turn axes (a valve
   /// whose stem and hand wheel are hidden).
   bool ambiguous = false;
-  Transform T_scene_model_alternative = Transform::Identity();  ///< that pose, when ambiguous
+  std::string alternative_model;                                ///< the alternative's model, when ambiguous (`model` for another pose of it)
+  size_t alternative_model_index = 0;                           ///< its index in the library
+  Transform T_scene_model_alternative = Transform::Identity();  ///< the alternative's pose, when ambiguous
 };
 
 /// A pose that was tried, with its figures and how far it got (diagnosis).

@@ -11,7 +11,7 @@ struct RecognizedObject {
   ObjectId id = 0;
   std::string model;
   Transform T_scene_model = Transform::Identity();
-  nlohmann::json figures;  ///< overlap, rmse_m, score, correspondences, ambiguous
+  nlohmann::json figures;  ///< overlap, rmse_m, score, correspondences, ambiguous (and then alternative_model: its name)
 };
 
 /// A model object: the mesh (as make_mesh_object) plus its spin-image stack at the library

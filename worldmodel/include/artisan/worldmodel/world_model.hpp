@@ -44,7 +44,7 @@ struct SceneObject {
   Transform T_world_object = Transform::Identity();
   double score = 0.0;
   double overlap = 0.0;
-  bool ambiguous = false;
+  bool ambiguous = false;   ///< another pose or another model fits as well (the recognized object names which)
   std::string status;       ///< "recognized", "accepted", "corrected", "added" (environment: "environment")
   std::vector<Transform> T_world_grasps;
   std::string attached_to;  ///< "" or e.g. "ur5/tool0"
