@@ -202,16 +202,16 @@ void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& 
         for (const auto& scene : scenes) {
           const auto found = worldmodel::recognize_models(ws, scene.id, models);
           json list = json::array();
-          for (const auto& f : found)
-            list.push_back({{"id", f.id}, {"path", ws.get(f.id).path}, {"model", f.model}, {"T_scene_model", to_row_major(f.T_scene_model)},
-                            {"score", f.figures["score"]}, {"overlap", f.figures["overlap"]}, {"rmse_m", f.figures["rmse_m"]},
-                            {"ambiguous", f.figures["ambiguous"]}});
-          for (auto& i : list)  // the alternative: another pose of the model, or another model on the same surface
-            if (i["ambiguous"].get<bool>()) {
-              const json md = ws.get(i["id"].get<worldmodel::ObjectId>()).metadata;
-              i["alternative_model"] = md.at("figures").at("alternative_model");
-              i["T_scene_model_alternative"] = md.at("T_scene_model_alternative");
+          for (const auto& f : found) {
+            const auto object = ws.get(f.id);
+            json& i = list.emplace_back(json{{"id", f.id}, {"path", object.path}, {"model", f.model}, {"T_scene_model", to_row_major(f.T_scene_model)},
+                                             {"score", f.figures["score"]}, {"overlap", f.figures["overlap"]}, {"rmse_m", f.figures["rmse_m"]},
+                                             {"ambiguous", f.figures["ambiguous"]}});
+            if (f.figures["ambiguous"].get<bool>()) {  // the alternative: another pose of the model, or another model on the same surface
+              i["alternative_model"] = f.figures.at("alternative_model");
+              i["T_scene_model_alternative"] = object.metadata.at("T_scene_model_alternative");
             }
+          }
           results.push_back({{"scene", scene.path}, {"instances", list}});
           progress.update(results.size(), scene.path + ": " + std::to_string(found.size()) + " found");
         }

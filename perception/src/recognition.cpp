@@ -1579,26 +1579,28 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         found.T_scene_model_alternative = other.verified[*other.winner].T;
       }
     }
-    // Ambiguous: another pose at the same place that puts the model's surface elsewhere (not a
-    // turn about the part's own symmetry) puts nearly as much of the model on the scene (coarse
-    // ICP overlap) and passes the tests too; the best of the first three such.
-    const PointCloud& found_model = library.model_points(next->m);
-    const double overlap = icp_point_to_plane(found_model, scene_points, scene_tree, top.T, coarse).overlap_fraction;
-    std::vector<const IcpResult*> rivals;
-    for (const auto& other : next->coarse_poses) {
-      const Transform& T = other.T_target_source;
-      if (other.overlap_fraction >= (1 - params.ambiguity_margin) * overlap && other.rmse_m <= params.max_rmse_factor * res &&
-          next->same->centre_distance(top.T, T) < 0.1 * next->same->diameter() && !(*next->same)(top.T, T, 0.1 * next->same->diameter()))
-        rivals.push_back(&other);
-    }
-    std::stable_sort(rivals.begin(), rivals.end(), [](const IcpResult* a, const IcpResult* b) { return a->overlap_fraction > b->overlap_fraction; });
-    for (size_t k = 0; k < rivals.size() && k < 3 && !found.ambiguous; ++k) {
-      const Transform& T = rivals[k]->T_target_source;
-      if (passes(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model, T)) {
-        found.ambiguous = true;
-        found.alternative_model = found.model;
-        found.alternative_model_index = found.model_index;
-        found.T_scene_model_alternative = T;
+    // Ambiguous, failing that: another pose at the same place that puts the model's surface
+    // elsewhere (not a turn about the part's own symmetry) puts nearly as much of the model on the
+    // scene (coarse ICP overlap) and passes the tests too; the best of the first three such.
+    if (!found.ambiguous) {
+      const PointCloud& found_model = library.model_points(next->m);
+      const double overlap = icp_point_to_plane(found_model, scene_points, scene_tree, top.T, coarse).overlap_fraction;
+      std::vector<const IcpResult*> rivals;
+      for (const auto& other : next->coarse_poses) {
+        const Transform& T = other.T_target_source;
+        if (other.overlap_fraction >= (1 - params.ambiguity_margin) * overlap && other.rmse_m <= params.max_rmse_factor * res &&
+            next->same->centre_distance(top.T, T) < 0.1 * next->same->diameter() && !(*next->same)(top.T, T, 0.1 * next->same->diameter()))
+          rivals.push_back(&other);
+      }
+      std::stable_sort(rivals.begin(), rivals.end(), [](const IcpResult* a, const IcpResult* b) { return a->overlap_fraction > b->overlap_fraction; });
+      for (size_t k = 0; k < rivals.size() && k < 3 && !found.ambiguous; ++k) {
+        const Transform& T = rivals[k]->T_target_source;
+        if (passes(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model, T)) {
+          found.ambiguous = true;
+          found.alternative_model = found.model;
+          found.alternative_model_index = found.model_index;
+          found.T_scene_model_alternative = T;
+        }
       }
     }
     result.instances.push_back(found);
