@@ -115,6 +115,10 @@ void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& ac
                                   {"status", i.status}, {"T_world_object", pose_json(obj.T_world_object)}, {"score", i.score},
                                   {"overlap", i.overlap}, {"ambiguous", i.ambiguous != 0}, {"triangles", i.mesh.n_triangles},
                                   {"grasps", grasps}, {"attached_to", i.attached_to}});
+        if (i.ambiguous) {
+          out["objects"].back()["alternative_model"] = i.alternative_model;
+          out["objects"].back()["T_world_alternative"] = pose_json(obj.T_world_alternative);
+        }
       }
       out["robots"] = json::array();
       for (const auto& r : s.client.robots()) {
@@ -136,7 +140,9 @@ void add_teleop_commands(CLI::App& app, const GlobalOptions& options, Action& ac
         if (i.kind == "environment") std::cout << "environment, " << i.mesh.n_triangles << " triangles\n";
         else
           std::cout << i.model << " at " << where(obj.T_world_object) << ", " << i.status << ", score " << std::setprecision(3) << i.score
-                    << ", " << obj.T_world_grasps.size() << " grasp(s)" << (i.ambiguous ? ", AMBIGUOUS (another pose or model fits as well)" : "")
+                    << ", " << obj.T_world_grasps.size() << " grasp(s)" << (!i.ambiguous ? ""
+                        : i.alternative_model == i.model || i.alternative_model.empty() ? ", AMBIGUOUS (another pose fits as well)"
+                        : ", AMBIGUOUS (" + i.alternative_model + " fits as well)")
                     << (i.attached_to.empty() ? "" : ", attached to " + i.attached_to) << "\n";
       }
       for (const auto& r : s.client.robots()) {

@@ -60,6 +60,7 @@ struct SceneClient::Impl {
     r.info = o;
     r.T_world_object = pose_or_identity(o.pose);
     for (const auto& g : o.grasps) r.T_world_grasps.push_back(pose_or_identity(g));
+    r.T_world_alternative = pose_or_identity(o.alternative_pose);
     if (auto it = meshes.find(o.mesh.hash); it != meshes.end()) r.mesh = it->second;
     return r;
   }

@@ -44,6 +44,8 @@ artisan::scene_object_t to_lcm(const worldmodel::SceneObject& o) {
   m.score = o.score;
   m.overlap = o.overlap;
   m.ambiguous = o.ambiguous;
+  m.alternative_model = o.alternative_model;
+  m.alternative_pose = to_lcm(o.T_world_alternative);
   m.mesh.hash = o.mesh_hash;
   m.mesh.n_vertices = int32_t(o.mesh->vertices.size());
   m.mesh.n_triangles = int32_t(o.mesh->faces.size());

@@ -60,6 +60,22 @@ class ServiceTest : public ::testing::Test {
   Eigen::Vector3d bunny_centre() const { return f.T_world_bunny * f.bunny_mesh.bounds().center().cast<double>(); }
 };
 
+// An object reported ambiguous reaches the client with its alternative's model and pose.
+TEST_F(ServiceTest, TheClientSeesAnAmbiguousObjectsAlternative) {
+  const Transform T_world_alternative = Transform(Eigen::Translation3d(0.3, 0.01, 0)) * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ());
+  const auto id = test::add_ambiguous_bunny(ws, f, "tee", T_world_alternative);
+  start();
+  SceneClient client(lcm, "operator", pump());
+  ASSERT_TRUE(client.wait_for_scene(10));
+  ASSERT_TRUE(client.objects().contains(id));
+  const auto& o = client.objects().at(id);
+  EXPECT_TRUE(o.info.ambiguous);
+  EXPECT_EQ(o.info.alternative_model, "tee");
+  EXPECT_TRUE(o.T_world_alternative.isApprox(T_world_alternative, 1e-9));
+  EXPECT_FALSE(client.objects().at(f.bunny).info.ambiguous);
+  EXPECT_EQ(client.objects().at(f.bunny).info.alternative_model, "");
+}
+
 TEST_F(ServiceTest, ClientRebuildsTheSceneAndQueriesIt) {
   start();
   SceneClient client(lcm, "operator", pump());

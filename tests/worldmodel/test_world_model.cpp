@@ -62,6 +62,23 @@ TEST_F(WorldModelTest, SceneHasTheEnvironmentCutAndTheObjectWithItsGrasps) {
   EXPECT_EQ(wm.revision(), revision);
 }
 
+// An object the recognizer reported ambiguous carries the alternative's model and pose (in the
+// world; the merged scene here is the world frame); one that is not carries none.
+TEST_F(WorldModelTest, AnAmbiguousObjectCarriesItsAlternative) {
+  const Transform T_world_alternative = Transform(Eigen::Translation3d(0.3, 0.01, 0)) * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ());
+  const auto id = test::add_ambiguous_bunny(ws, f, "tee", T_world_alternative);
+  WorldModel wm(ws, "/cell");
+  const auto* ambiguous = wm.find(id);
+  ASSERT_NE(ambiguous, nullptr);
+  EXPECT_TRUE(ambiguous->ambiguous);
+  EXPECT_EQ(ambiguous->alternative_model, "tee");
+  EXPECT_TRUE(ambiguous->T_world_alternative.isApprox(T_world_alternative, 1e-9));
+  const auto* bunny = wm.find(f.bunny);
+  ASSERT_NE(bunny, nullptr);
+  EXPECT_FALSE(bunny->ambiguous);
+  EXPECT_TRUE(bunny->alternative_model.empty());
+}
+
 TEST_F(WorldModelTest, EditsAreStoredAsVersionsAndUpdateTheScene) {
   WorldModel wm(ws, "/cell");
   const auto r0 = wm.revision();

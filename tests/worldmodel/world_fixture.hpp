@@ -82,4 +82,22 @@ inline WorldFixture make_world_fixture(worldmodel::Workspace& ws) {
   return f;
 }
 
+/// A second recognition of the bunny in /cell, 0.3 m along x from the first, reported ambiguous
+/// with `alternative_model` at `T_world_alternative` (as the recognizer stores one); its ID.
+inline worldmodel::ObjectId add_ambiguous_bunny(worldmodel::Workspace& ws, const WorldFixture& f, const std::string& alternative_model,
+                                                const Transform& T_world_alternative) {
+  using namespace worldmodel;
+  NewObject r;
+  r.kind = ObjectKind::kRecognizedModel;
+  r.subkind = "bunny";
+  r.name = "bunny-in-merged-2";
+  r.metadata = {{"model", "/bunny"},
+                {"model_id", f.model},
+                {"T_scene_model", to_row_major(Transform(Eigen::Translation3d(0.3, 0, 0)) * f.T_world_bunny)},
+                {"T_scene_model_alternative", to_row_major(T_world_alternative)},
+                {"figures", {{"score", 0.5}, {"overlap", 0.3}, {"rmse_m", 0.0005}, {"ambiguous", true}, {"alternative_model", alternative_model}}}};
+  r.provenance = Provenance{"recognize", {}, {f.environment, f.model}};
+  return ws.add(ws.resolve("/cell").id, r);
+}
+
 }  // namespace artisan::test

@@ -27,6 +27,7 @@ struct RemoteObject {
   artisan::scene_object_t info;               ///< as the service published it
   Transform T_world_object = Transform::Identity();
   std::vector<Transform> T_world_grasps;
+  Transform T_world_alternative = Transform::Identity();  ///< when info.ambiguous: the alternative's pose (its model: info.alternative_model)
   std::shared_ptr<const TriangleMesh> mesh;  ///< once fetched (object frame)
 };
 

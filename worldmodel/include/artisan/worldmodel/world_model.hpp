@@ -44,7 +44,9 @@ struct SceneObject {
   Transform T_world_object = Transform::Identity();
   double score = 0.0;
   double overlap = 0.0;
-  bool ambiguous = false;   ///< another pose or another model fits as well (the recognized object names which)
+  bool ambiguous = false;   ///< another pose or another model fits as well:
+  std::string alternative_model;                        ///< its model ("" when not ambiguous)
+  Transform T_world_alternative = Transform::Identity();  ///< and its pose
   std::string status;       ///< "recognized", "accepted", "corrected", "added" (environment: "environment")
   std::vector<Transform> T_world_grasps;
   std::string attached_to;  ///< "" or e.g. "ur5/tool0"
