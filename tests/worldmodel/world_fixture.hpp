@@ -51,6 +51,18 @@ inline TriangleMesh box_mesh(const Eigen::Vector3f& size) {
 inline std::filesystem::path ur5_urdf() { return data_dir() / "robots/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"; }
 inline std::filesystem::path robot_packages() { return data_dir() / "robots"; }
 
+/// The bunny recognized in the merged environment (whose frame is the world's) at `T_scene_model`,
+/// as the recognizer stores it.
+inline worldmodel::NewObject recognized_bunny(const WorldFixture& f, const std::string& name, const Transform& T_scene_model, nlohmann::json figures) {
+  worldmodel::NewObject r;
+  r.kind = worldmodel::ObjectKind::kRecognizedModel;
+  r.subkind = "bunny";
+  r.name = name;
+  r.metadata = {{"model", "/bunny"}, {"model_id", f.model}, {"T_scene_model", to_row_major(T_scene_model)}, {"figures", std::move(figures)}};
+  r.provenance = worldmodel::Provenance{"recognize", {}, {f.environment, f.model}};
+  return r;
+}
+
 /// Fills folder "/cell" of `ws`.
 inline WorldFixture make_world_fixture(worldmodel::Workspace& ws) {
   using namespace worldmodel;
@@ -69,16 +81,8 @@ inline WorldFixture make_world_fixture(worldmodel::Workspace& ws) {
   f.environment = ws.add(cell, make_mesh_object(ObjectKind::kMesh, "merged", "merged", environment, {"merge", {}, {}}));
   nlohmann::json grasps = nlohmann::json::array({to_row_major(f.T_model_grasp)});
   f.model = ws.add(ws.root(), make_mesh_object(ObjectKind::kModel, "", "bunny", f.bunny_mesh, {"import", {}, {}}, {{"T_model_grasps", grasps}}));
-  NewObject r;
-  r.kind = ObjectKind::kRecognizedModel;
-  r.subkind = "bunny";
-  r.name = "bunny-in-merged-1";
-  r.metadata = {{"model", "/bunny"},
-                {"model_id", f.model},
-                {"T_scene_model", to_row_major(f.T_world_bunny)},
-                {"figures", {{"score", 0.9}, {"overlap", 0.6}, {"rmse_m", 0.0004}, {"ambiguous", false}}}};
-  r.provenance = Provenance{"recognize", {}, {f.environment, f.model}};
-  f.bunny = ws.add(cell, r);
+  f.bunny = ws.add(cell, recognized_bunny(f, "bunny-in-merged-1", f.T_world_bunny,
+                                          {{"score", 0.9}, {"overlap", 0.6}, {"rmse_m", 0.0004}, {"ambiguous", false}}));
   return f;
 }
 
@@ -86,17 +90,9 @@ inline WorldFixture make_world_fixture(worldmodel::Workspace& ws) {
 /// with `alternative_model` at `T_world_alternative` (as the recognizer stores one); its ID.
 inline worldmodel::ObjectId add_ambiguous_bunny(worldmodel::Workspace& ws, const WorldFixture& f, const std::string& alternative_model,
                                                 const Transform& T_world_alternative) {
-  using namespace worldmodel;
-  NewObject r;
-  r.kind = ObjectKind::kRecognizedModel;
-  r.subkind = "bunny";
-  r.name = "bunny-in-merged-2";
-  r.metadata = {{"model", "/bunny"},
-                {"model_id", f.model},
-                {"T_scene_model", to_row_major(Transform(Eigen::Translation3d(0.3, 0, 0)) * f.T_world_bunny)},
-                {"T_scene_model_alternative", to_row_major(T_world_alternative)},
-                {"figures", {{"score", 0.5}, {"overlap", 0.3}, {"rmse_m", 0.0005}, {"ambiguous", true}, {"alternative_model", alternative_model}}}};
-  r.provenance = Provenance{"recognize", {}, {f.environment, f.model}};
+  auto r = recognized_bunny(f, "bunny-in-merged-2", Transform(Eigen::Translation3d(0.3, 0, 0)) * f.T_world_bunny,
+                            {{"score", 0.5}, {"overlap", 0.3}, {"rmse_m", 0.0005}, {"ambiguous", true}, {"alternative_model", alternative_model}});
+  r.metadata["T_scene_model_alternative"] = to_row_major(T_world_alternative);
   return ws.add(ws.resolve("/cell").id, r);
 }
 
