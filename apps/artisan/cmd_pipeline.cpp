@@ -225,8 +225,8 @@ void add_pipeline_commands(CLI::App& app, const GlobalOptions& options, Action& 
           for (const auto& f : r["instances"])
             std::cerr << "found " << f["model"].get<std::string>() << " in " << scene << ": " << f["path"].get<std::string>() << ", overlap "
                       << f["overlap"].get<double>() << ", residual " << f["rmse_m"].get<double>() * 1e3 << " mm"
-                      << (!f["ambiguous"].get<bool>()                       ? ""
-                          : f["alternative_model"].get<std::string>() == f["model"].get<std::string>() ? " (ambiguous: another pose fits almost as well)"
+                      << (!f["ambiguous"].get<bool>() ? ""
+                          : f["alternative_model"] == f["model"] ? " (ambiguous: another pose fits almost as well)"
                           : " (ambiguous: " + f["alternative_model"].get<std::string>() + " fits the same surface almost as well)")
                       << "\n";
         }

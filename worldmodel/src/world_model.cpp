@@ -180,12 +180,15 @@ SceneObject WorldModel::scene_object(const ObjectInfo& o, const std::map<ObjectI
   if (model_it == model_infos_.end()) model_it = model_infos_.emplace(s.model_id, ws_.get(s.model_id)).first;
   const auto& model = model_it->second;
   s.model = model.name;
-  // Where the scene the object was recognized in lies (identity for one added by an operator).
-  Transform T_world_scene = Transform::Identity();
-  if (const auto prov = ws_.provenance(o.id); prov && !prov->inputs.empty())
-    if (auto it = T_world_mesh.find(prov->inputs.front()); it != T_world_mesh.end()) T_world_scene = it->second;
+  // Where the scene the object was recognized in lies (identity for one added by an operator);
+  // looked up only when needed (an object an operator placed has its world pose stored).
+  const auto T_world_scene = [&] {
+    if (const auto prov = ws_.provenance(o.id); prov && !prov->inputs.empty())
+      if (auto it = T_world_mesh.find(prov->inputs.front()); it != T_world_mesh.end()) return it->second;
+    return Transform(Transform::Identity());
+  };
   if (md.contains("T_world_object")) s.T_world_object = transform_from_json(md["T_world_object"], o.path);
-  else s.T_world_object = T_world_scene * transform_from_json(md.at("T_scene_model"), o.path);
+  else s.T_world_object = T_world_scene() * transform_from_json(md.at("T_scene_model"), o.path);
   if (md.contains("figures")) {
     s.score = md["figures"].value("score", 0.0);
     s.overlap = md["figures"].value("overlap", 0.0);
@@ -194,7 +197,7 @@ SceneObject WorldModel::scene_object(const ObjectInfo& o, const std::map<ObjectI
     // models), in the world as recognized (an operator's correction moves the object, not it).
     if (s.ambiguous && md["figures"].contains("alternative_model") && md.contains("T_scene_model_alternative")) {
       s.alternative_model = md["figures"]["alternative_model"].get<std::string>();
-      s.T_world_alternative = T_world_scene * transform_from_json(md["T_scene_model_alternative"], o.path + ": T_scene_model_alternative");
+      s.T_world_alternative = T_world_scene() * transform_from_json(md["T_scene_model_alternative"], o.path + ": T_scene_model_alternative");
     }
   }
   if (model.metadata.contains("T_model_grasps"))
