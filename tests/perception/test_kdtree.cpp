@@ -80,5 +80,70 @@ TEST(KdTree3, WithinFindsEveryPointInTheBall) {
   }
 }
 
+// With a grid of cells for small radii: the same points found as by brute force, for radii up
+// to the cell (read from the grid) and beyond it (the tree), queries outside the points' box and
+// NaN queries included.
+TEST(KdTree3, TheGridOfCellsFindsWhatBruteForceFinds) {
+  std::mt19937 rng(5);
+  // Points on a sphere's surface and a plane below it, as a scene's surface lies.
+  std::vector<Eigen::Vector3f> points;
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (int i = 0; i < 4000; ++i) points.push_back(0.5f * Eigen::Vector3f(g(rng), g(rng), g(rng)).normalized());
+  for (int i = 0; i < 4000; ++i) points.push_back({u(rng), u(rng), -0.6f});
+  const float cell = 0.05f;
+  const KdTree3 tree(points, cell);
+  std::vector<size_t> found;
+  size_t hits = 0, misses = 0;
+  // Queries near the surface (a point moved by about a cell) and anywhere in a box larger than it.
+  std::vector<Eigen::Vector3f> queries = random_points(1500, rng);
+  for (auto& q : queries) q *= 1.4f;
+  for (int i = 0; i < 1500; ++i) queries.push_back(points[rng() % points.size()] + cell * Eigen::Vector3f(g(rng), g(rng), g(rng)));
+  for (const auto& query : queries) {
+    const auto truth = brute_nearest(points, query);
+    for (const float radius : {0.5f * cell, cell, 2.5f * cell}) {
+      const auto near = tree.nearest_within(query, radius);
+      if (truth.second <= radius * radius) {
+        ASSERT_TRUE(near.has_value()) << "radius " << radius;
+        EXPECT_FLOAT_EQ(near->second, truth.second);
+        EXPECT_FLOAT_EQ((points[near->first] - query).squaredNorm(), truth.second);
+        ++hits;
+      } else {
+        EXPECT_FALSE(near.has_value()) << "radius " << radius;
+        ++misses;
+      }
+      tree.within(query, radius, found);
+      std::sort(found.begin(), found.end());
+      std::vector<size_t> all;
+      for (size_t i = 0; i < points.size(); ++i)
+        if ((points[i] - query).squaredNorm() < radius * radius) all.push_back(i);
+      EXPECT_EQ(found, all) << "radius " << radius;
+    }
+  }
+  EXPECT_GT(hits, 1000u);
+  EXPECT_GT(misses, 1000u);
+  const Eigen::Vector3f nan = Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
+  EXPECT_FALSE(tree.nearest_within(nan, cell).has_value());
+  tree.within(nan, cell, found);
+  EXPECT_TRUE(found.empty());
+  EXPECT_FALSE(tree.nearest_within({100.0f, 0, 0}, cell).has_value());  // far outside the box
+  // A point exactly at the radius is taken, as by the tree.
+  const KdTree3 two({{0, 0, 0}, {1, 0, 0}}, 0.25f);
+  ASSERT_TRUE(two.nearest_within({0.25f, 0, 0}, 0.25f).has_value());
+  EXPECT_EQ(two.nearest_within({0.9f, 0, 0}, 0.25f)->first, 1u);
+}
+
+// Points so far apart that a grid of small cells would need too many rows: the tree answers.
+TEST(KdTree3, PointsTooFarApartForTheGridAreStillFound) {
+  const std::vector<Eigen::Vector3f> points = {{0, 0, 0}, {0.001f, 0, 0}, {0, 5000, 5000}, {0, 5000.002f, 5000}};
+  const KdTree3 tree(points, 0.001f);
+  EXPECT_EQ(tree.nearest_within({0.0009f, 0, 0}, 0.001f)->first, 1u);
+  EXPECT_EQ(tree.nearest_within({0, 5000.0015f, 5000}, 0.001f)->first, 3u);
+  std::vector<size_t> found;
+  tree.within({0.0005f, 0, 0}, 0.001f, found);
+  std::sort(found.begin(), found.end());
+  EXPECT_EQ(found, (std::vector<size_t>{0, 1}));
+}
+
 }  // namespace
 }  // namespace artisan
