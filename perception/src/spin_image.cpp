@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <string>
 #include <unordered_map>
 
@@ -59,47 +60,65 @@ SpinImageStack compute_spin_images(const PointCloud& cloud, const KdTree3& tree,
   return stack;
 }
 
-PointCloud resample_oriented_points(const PointCloud& cloud, double resolution_m) {
-  if (!(resolution_m > 0)) throw Error("resample: resolution " + std::to_string(resolution_m) + " m is not positive");
-  if (cloud.normals.size() != cloud.points.size()) throw Error("resample: the cloud needs one normal per point");
+namespace {
+// The mean point and normal of the oriented points in each cubic cell of a resolution, the cells
+// in the order points first reach them (deterministic), each cell's sums in the order its points came.
+class CellMeans {
+ public:
+  explicit CellMeans(double resolution_m) : inv_(1.0 / resolution_m) {}
+  void add(const Eigen::Vector3f& point, const Eigen::Vector3f& normal) {
+    const Eigen::Vector3d p = point.cast<double>();
+    const auto key = (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.x() * inv_)) & 0x1fffff) << 42) |
+                     (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.y() * inv_)) & 0x1fffff) << 21) |
+                     (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.z() * inv_)) & 0x1fffff));
+    const auto [it, inserted] = index_.try_emplace(key, cells_.size());
+    if (inserted) cells_.emplace_back();
+    Cell& c = cells_[it->second];
+    c.sum_p += p;
+    c.sum_n += normal.cast<double>();
+    ++c.count;
+  }
+  PointCloud means() const {
+    PointCloud out;
+    for (const Cell& c : cells_) {
+      const double len = c.sum_n.norm();
+      if (len < 1e-9) continue;  // normals cancel: a sheet seen from both sides
+      out.points.push_back((c.sum_p / c.count).cast<float>());
+      out.normals.push_back((c.sum_n / len).cast<float>());
+    }
+    return out;
+  }
+
+ private:
   struct Cell {
     Eigen::Vector3d sum_p = Eigen::Vector3d::Zero();
     Eigen::Vector3d sum_n = Eigen::Vector3d::Zero();
     int count = 0;
   };
-  std::unordered_map<uint64_t, Cell> cells;
-  std::vector<uint64_t> order;
-  const double inv = 1.0 / resolution_m;
-  for (size_t i = 0; i < cloud.points.size(); ++i) {
-    const Eigen::Vector3d p = cloud.points[i].cast<double>();
-    const auto key = (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.x() * inv)) & 0x1fffff) << 42) |
-                     (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.y() * inv)) & 0x1fffff) << 21) |
-                     (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.z() * inv)) & 0x1fffff));
-    auto [it, inserted] = cells.try_emplace(key);
-    if (inserted) order.push_back(key);
-    it->second.sum_p += p;
-    it->second.sum_n += cloud.normals[i].cast<double>();
-    ++it->second.count;
-  }
-  PointCloud out;
-  for (uint64_t key : order) {  // first-seen order: deterministic
-    const Cell& c = cells[key];
-    const double len = c.sum_n.norm();
-    if (len < 1e-9) continue;  // normals cancel: a sheet seen from both sides
-    out.points.push_back((c.sum_p / c.count).cast<float>());
-    out.normals.push_back((c.sum_n / len).cast<float>());
-  }
-  return out;
+  double inv_;
+  std::unordered_map<uint64_t, size_t> index_;  ///< into cells_, by cell
+  std::vector<Cell> cells_;
+};
+}  // namespace
+
+PointCloud resample_oriented_points(const PointCloud& cloud, double resolution_m) {
+  if (!(resolution_m > 0)) throw Error("resample: resolution " + std::to_string(resolution_m) + " m is not positive");
+  if (cloud.normals.size() != cloud.points.size()) throw Error("resample: the cloud needs one normal per point");
+  CellMeans cells(resolution_m);
+  for (size_t i = 0; i < cloud.points.size(); ++i) cells.add(cloud.points[i], cloud.normals[i]);
+  return cells.means();
 }
 
 PointCloud sample_surface(const TriangleMesh& mesh, double resolution_m) {
   if (!(resolution_m > 0)) throw Error("sample surface: resolution " + std::to_string(resolution_m) + " m is not positive");
-  TriangleMesh normals_from = mesh;
-  if (normals_from.normals.size() != normals_from.vertices.size()) normals_from.compute_vertex_normals();
+  std::optional<TriangleMesh> with_normals;  // a copy, when the mesh has none
+  if (mesh.normals.size() != mesh.vertices.size()) with_normals.emplace(mesh).compute_vertex_normals();
   const auto& v = mesh.vertices;
-  const auto& vn = normals_from.normals;
+  const auto& vn = with_normals ? with_normals->normals : mesh.normals;
+  // Points every half resolution on each face (a dense cloud of them would be a dozen per scene
+  // point), averaged per cell as they come.
   const double step = 0.5 * resolution_m;
-  PointCloud dense;
+  CellMeans cells(resolution_m);
   for (const auto& f : mesh.faces) {
     const Eigen::Vector3f &a = v[f[0]], &b = v[f[1]], &c = v[f[2]];
     Eigen::Vector3f face = (b - a).cross(c - a);
@@ -117,11 +136,10 @@ PointCloud sample_surface(const TriangleMesh& mesh, double resolution_m) {
           const float t = 1.0f - u - w;
           Eigen::Vector3f normal = t * vn[f[0]] + u * vn[f[1]] + w * vn[f[2]];
           if (!(normal.norm() > 1e-6f) || normal.normalized().dot(face) < 0.7071f) normal = face;
-          dense.points.push_back(t * a + u * b + w * c);
-          dense.normals.push_back(normal.normalized());
+          cells.add(t * a + u * b + w * c, normal.normalized());
         }
   }
-  return resample_oriented_points(dense, resolution_m);
+  return cells.means();
 }
 
 }  // namespace artisan
