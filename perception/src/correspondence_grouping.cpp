@@ -49,7 +49,7 @@ Transform transform_from(const PointCloud& src, const PointCloud& tgt, const std
 }  // namespace
 
 GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tgt, std::vector<Correspondence> candidates,
-                                     const GroupingParams& params) {
+                                     const GroupingParams& params, PairAgreements* reuse) {
   GroupingResult result;
   if (candidates.empty()) return result;
   const float best = std::max_element(candidates.begin(), candidates.end(), [](auto& a, auto& b) { return a.similarity < b.similarity; })->similarity;
@@ -63,18 +63,42 @@ GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tg
   // group, and seeds are tried in order of how many others agree with them.
   const size_t n = candidates.size();
   const float gamma = static_cast<float>(params.gamma_m), t_gc = static_cast<float>(params.geometric_consistency);
-  // Symmetric (the larger of the two directions' disagreements): each pair measured once.
+  // Symmetric (the larger of the two directions' disagreements): each pair measured once, and
+  // kept once (row a < column b).
   std::vector<uint8_t> pair(n * n, 0);
+  const auto agree = [n](const std::vector<uint8_t>& p, size_t a, size_t b) { return a < b ? p[a * n + b] : p[b * n + a]; };
+  // Each candidate's place among those `reuse` measured, if it is one of them.
+  constexpr size_t kNew = SIZE_MAX;
+  std::vector<size_t> before(n, kNew);
+  if (reuse && !reuse->candidates.empty()) {
+    const auto key = [](const Correspondence& c) { return std::pair{c.source, c.target}; };
+    std::vector<std::pair<std::pair<size_t, size_t>, size_t>> old(reuse->candidates.size());
+    for (size_t k = 0; k < old.size(); ++k) old[k] = {key(reuse->candidates[k]), k};
+    std::sort(old.begin(), old.end());
+    for (size_t a = 0; a < n; ++a) {
+      const auto it = std::lower_bound(old.begin(), old.end(), std::pair{key(candidates[a]), size_t{0}});
+      if (it != old.end() && it->first == key(candidates[a])) before[a] = it->second;
+    }
+  }
+  const size_t m = reuse ? reuse->candidates.size() : 0;
+  const auto measured = [&](size_t a, size_t b) {  // by `reuse`, a != b
+    const size_t i = std::min(before[a], before[b]), j = std::max(before[a], before[b]);
+    return reuse->pair[i * m + j];
+  };
 #pragma omp parallel for schedule(dynamic, 16)
   for (size_t a = 0; a < n; ++a)
-    for (size_t b = a + 1; b < n; ++b) pair[a * n + b] = agreement(src, tgt, candidates[a], candidates[b], gamma, t_gc);
-  for (size_t a = 0; a < n; ++a)
-    for (size_t b = 0; b < a; ++b) pair[a * n + b] = pair[b * n + a];
-  std::vector<size_t> kept, support(n, 0);
-  for (size_t a = 0; a < n; ++a) {
-    for (size_t b = 0; b < n; ++b) support[a] += (pair[a * n + b] & kConsistent) != 0;
-    if (static_cast<int>(support[a]) + 1 >= params.min_group_size) kept.push_back(a);
+    for (size_t b = a + 1; b < n; ++b)
+      pair[a * n + b] = before[a] != kNew && before[b] != kNew ? measured(a, b) : agreement(src, tgt, candidates[a], candidates[b], gamma, t_gc);
+  if (reuse) {
+    reuse->candidates = candidates;
+    reuse->pair = pair;  // a copy: the grouping below reads it
   }
+  std::vector<size_t> kept, support(n, 0);
+  for (size_t a = 0; a < n; ++a)
+    for (size_t b = a + 1; b < n; ++b)
+      if (pair[a * n + b] & kConsistent) ++support[a], ++support[b];
+  for (size_t a = 0; a < n; ++a)
+    if (static_cast<int>(support[a]) + 1 >= params.min_group_size) kept.push_back(a);
   std::stable_sort(kept.begin(), kept.end(), [&](size_t a, size_t b) { return support[a] > support[b]; });
   result.consistent_candidates = kept.size();
 
@@ -89,7 +113,7 @@ GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tg
       if (c == kept[s]) continue;
       bool ok = true;
       for (size_t g : group)
-        if (!(pair[c * n + g] & kGroupable)) {
+        if (!(agree(pair, c, g) & kGroupable)) {
           ok = false;
           break;
         }

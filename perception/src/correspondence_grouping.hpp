@@ -2,6 +2,7 @@
 // Private: the correspondence stages shared by registration and recognition (Johnson & Hebert,
 // PAMI 1999, section 5): similarity filtering, geometric consistency, grouping, a transform per
 // group.
+#include <cstdint>
 #include <vector>
 
 #include "artisan/core/pose.hpp"
@@ -31,6 +32,13 @@ struct GroupedTransform {
   std::vector<Correspondence> members;
 };
 
+/// The geometric consistency of every pair of the candidates a grouping last considered, for the
+/// next grouping of mostly the same candidates (a recognizer's search, as surface gets explained).
+struct PairAgreements {
+  std::vector<Correspondence> candidates;
+  std::vector<uint8_t> pair;  ///< n x n
+};
+
 struct GroupingResult {
   std::vector<GroupedTransform> groups;
   size_t consistent_candidates = 0;
@@ -46,7 +54,9 @@ inline IcpSettings verification_icp(double resolution_m, int iterations) {
   return s;
 }
 
+/// With `reuse`, the agreements of pairs it holds are taken from it, and it is replaced by this
+/// grouping's (the result is the same either way).
 GroupingResult group_correspondences(const PointCloud& source, const PointCloud& target, std::vector<Correspondence> candidates,
-                                     const GroupingParams& params);
+                                     const GroupingParams& params, PairAgreements* reuse = nullptr);
 
 }  // namespace artisan::detail

@@ -490,6 +490,9 @@ struct PoseHypothesis {
   Transform T_scene_model = Transform::Identity();
   size_t first_support = 0;  ///< sampled model points on the scene surface when made
   size_t support = 0;        ///< the same, leaving out the surface accepted instances explain
+  /// The scene points those sampled model points lie on, once ranked (its pose and tolerance do not
+  /// change: its support is recounted from them as surface gets explained).
+  std::optional<std::vector<uint32_t>> lies_on;
   bool done = false;         ///< refined and verified (or made redundant): not tried again
   RecognitionCandidate::Source source = RecognitionCandidate::Source::pairs;
   size_t size = 0;           ///< a group's correspondences
@@ -511,13 +514,21 @@ class SurfaceSupport {
   /// The support of a new hypothesis, with nothing explained yet.
   size_t first(const Transform& T_scene_model, double within_m) const { return (*this)(T_scene_model, within_m, nothing_explained_); }
   size_t operator()(const Transform& T_scene_model, double within_m, const std::vector<char>& explained) const {
+    return count(lies_on(T_scene_model, within_m), explained);
+  }
+  /// The scene point each sampled model point on the scene surface lies on (some may repeat).
+  std::vector<uint32_t> lies_on(const Transform& T_scene_model, double within_m) const {
     const Eigen::Isometry3f T = T_scene_model.cast<float>();
-    size_t on = 0;
+    std::vector<uint32_t> on;
     for (const size_t i : sample_) {
       const auto j = tree_.nearest_within(T * model_.points[i], static_cast<float>(within_m));
-      on += j && !explained[j->first] && (T.linear() * model_.normals[i]).dot(scene_.normals[j->first]) >= 0.7f;
+      if (j && (T.linear() * model_.normals[i]).dot(scene_.normals[j->first]) >= 0.7f) on.push_back(static_cast<uint32_t>(j->first));
     }
     return on;
+  }
+  /// Of those, the ones not explained.
+  static size_t count(const std::vector<uint32_t>& lies_on, const std::vector<char>& explained) {
+    return static_cast<size_t>(std::count_if(lies_on.begin(), lies_on.end(), [&](uint32_t j) { return !explained[j]; }));
   }
 
  private:
@@ -1144,7 +1155,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   const double res = library.params().resolution_m;
   auto t0 = Clock::now();
   const PointCloud scene_points = sample_surface(scene, res);
-  const KdTree3 scene_tree(scene_points.points);
+  const KdTree3 scene_tree(scene_points.points, static_cast<float>(2.0 * res));
   // Basis points: a share of the scene's points, leaving out those whose neighbourhood (half the
   // spin-image support) is flat within a bin: a plane's spin image matches any model's flat
   // parts equally well and only feeds the grouping with wrong matches (tables, walls, floors).
@@ -1270,6 +1281,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   struct Search {
     size_t m = 0;
     std::vector<detail::Correspondence> candidates;  ///< spin-image matches on surface not yet explained
+    size_t grouped = 0;  ///< how many candidates there were when last grouped (they are only ever removed)
+    detail::PairAgreements agreements;  ///< of the last grouping
     /// pair and voting hypotheses, then the groups' poses as they come (a deque: Verified points into it)
     std::deque<PoseHypothesis> hypotheses;
     std::unique_ptr<SurfaceSupport> surface_support;
@@ -1318,22 +1331,28 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   };
   const auto ranked_starts = [&](Search& s, bool regroup) {
     const PointCloud& model = library.model_points(s.m);
-    if (regroup && params.group_hypotheses && s.candidates.size() >= 3)
-      for (const auto& g : detail::group_correspondences(model, scene_points, s.candidates, grouping).groups) {
+    // The same candidates group the same way: grouped again only when some were removed.
+    if (regroup && params.group_hypotheses && s.candidates.size() >= 3 && s.candidates.size() != std::exchange(s.grouped, s.candidates.size()))
+      for (const auto& g : detail::group_correspondences(model, scene_points, s.candidates, grouping, &s.agreements).groups) {
         const auto same = [&](const PoseHypothesis& h) { return h.T_scene_model.matrix() == g.T_target_source.matrix(); };
         if (std::any_of(s.hypotheses.begin(), s.hypotheses.end(), same)) continue;
         PoseHypothesis& h = s.hypotheses.emplace_back();
         h.T_scene_model = g.T_target_source;
         h.source = RecognitionCandidate::Source::grouping;
         h.size = g.size;
-        h.first_support = (*s.surface_support)(h.T_scene_model, 2.0 * res, s.unusable);
+        h.lies_on = s.surface_support->lies_on(h.T_scene_model, 2.0 * res);
+        h.first_support = SurfaceSupport::count(*h.lies_on, s.unusable);
       }
     // Groups are scored with a wider margin: their coarser first pose only the ICP brings onto the
-    // surface. The supports in parallel (each is 200 nearest-point queries), then taken in order.
+    // surface. What each lies on is found once (200 nearest-point queries, in parallel), then
+    // counted, and the hypotheses taken in order.
 #pragma omp parallel for schedule(dynamic, 8)
     for (size_t k = 0; k < s.hypotheses.size(); ++k)
-      if (PoseHypothesis& h = s.hypotheses[k]; !h.done)
-        h.support = (*s.surface_support)(h.T_scene_model, (h.source == RecognitionCandidate::Source::grouping ? 2.0 : 1.5) * res, s.unusable);
+      if (PoseHypothesis& h = s.hypotheses[k]; !h.done) {
+        if (!h.lies_on)
+          h.lies_on = s.surface_support->lies_on(h.T_scene_model, (h.source == RecognitionCandidate::Source::grouping ? 2.0 : 1.5) * res);
+        h.support = SurfaceSupport::count(*h.lies_on, s.unusable);
+      }
     std::vector<Start> groups, pairs;
     for (auto& h : s.hypotheses) {
       if (h.done) continue;
@@ -1657,7 +1676,7 @@ RecognitionCandidate check_pose(const TriangleMesh& scene, SpinImageLibrary& lib
   library.compress();
   const double res = library.params().resolution_m;
   const PointCloud scene_points = sample_surface(scene, res);
-  const KdTree3 scene_tree(scene_points.points);
+  const KdTree3 scene_tree(scene_points.points, static_cast<float>(2.0 * res));
   const FreeSpace free_space = scene_free_space(scene_points, scene_tree, library, params);
   const PointCloud& model = library.model_points(model_index);
   IcpSettings settings = fine_icp(res);
