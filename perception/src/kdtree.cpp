@@ -47,6 +47,20 @@ struct IndexCollector {
   float worstDist() const { return radius_sq; }
 };
 
+// A radius result set that stops the search at the first point passing a test.
+struct FirstPassing {
+  float radius_sq;
+  const std::function<bool(size_t)>& test;
+  bool found = false;
+  size_t size() const { return found ? 1 : 0; }
+  bool full() const { return true; }
+  bool addPoint(float dist_sq, size_t index) {
+    if (dist_sq < radius_sq && test(index)) found = true;
+    return !found;
+  }
+  float worstDist() const { return radius_sq; }
+};
+
 // Cubic cells of one size over the points' bounding box, for queries no wider than a cell: the
 // points sorted into rows of cells along the box's longest axis (a row: the points of one pair of
 // cell indices on the two other axes, ordered along it), so that a query reads the few cells about
@@ -177,6 +191,12 @@ void KdTree3::within(const Eigen::Vector3f& query, float radius, std::vector<siz
   }
   IndexCollector collector{radius * radius, indices};
   impl_->tree.findNeighbors(collector, query.data(), nanoflann::SearchParams(32, 0.0f, false));
+}
+
+bool KdTree3::any_within(const Eigen::Vector3f& query, float radius, const std::function<bool(size_t)>& test) const {
+  FirstPassing first{radius * radius, test};
+  impl_->tree.findNeighbors(first, query.data(), nanoflann::SearchParams(32, 0.0f, false));
+  return first.found;
 }
 
 const std::vector<Eigen::Vector3f>& KdTree3::points() const { return impl_->cloud.pts; }

@@ -1168,11 +1168,10 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
 #pragma omp parallel for schedule(dynamic, 256)
     for (size_t i = 0; i < scene_points.points.size(); ++i) {
       if (!params.skip_flat_basis_points) continue;
-      std::vector<size_t> near;
-      scene_tree.within(scene_points.points[i], radius, near);
-      float deviation = 0;
-      for (size_t j : near) deviation = std::max(deviation, std::abs(scene_points.normals[i].dot(scene_points.points[j] - scene_points.points[i])));
-      flat[i] = deviation < static_cast<float>(bin);
+      const auto off_plane = [&](size_t j) {
+        return !(std::abs(scene_points.normals[i].dot(scene_points.points[j] - scene_points.points[i])) < static_cast<float>(bin));
+      };
+      flat[i] = !scene_tree.any_within(scene_points.points[i], radius, off_plane);
     }
     size_t k = 0;
     for (size_t i = 0; i < scene_points.points.size(); ++i)

@@ -80,6 +80,23 @@ TEST(KdTree3, WithinFindsEveryPointInTheBall) {
   }
 }
 
+// any_within: whether a point in the ball passes the test, as brute force says.
+TEST(KdTree3, AnyWithinAgreesWithBruteForce) {
+  std::mt19937 rng(3);
+  const auto points = random_points(3000, rng);
+  const KdTree3 tree(points);
+  size_t yes = 0, no = 0;
+  for (const auto& q : random_points(300, rng)) {
+    const auto above = [&](size_t i) { return points[i].z() > q.z() + 0.15f; };
+    bool truth = false;
+    for (size_t i = 0; i < points.size(); ++i) truth = truth || ((points[i] - q).squaredNorm() < 0.2f * 0.2f && above(i));
+    EXPECT_EQ(tree.any_within(q, 0.2f, above), truth);
+    ++(truth ? yes : no);
+  }
+  EXPECT_GT(yes, 30u);
+  EXPECT_GT(no, 30u);
+}
+
 // With a grid of cells for small radii: the same points found as by brute force, for radii up
 // to the cell (read from the grid) and beyond it (the tree), queries outside the points' box and
 // NaN queries included.

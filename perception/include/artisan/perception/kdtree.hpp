@@ -2,6 +2,7 @@
 // A 3-D k-d tree (nanoflann, compiled once in kdtree.cpp) for closest-point and support queries,
 // with a grid of cells for the small-radius queries ICP and verification make by the thousand.
 #include <cstddef>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <utility>
@@ -28,6 +29,9 @@ class KdTree3 {
   std::optional<std::pair<size_t, float>> nearest_within(const Eigen::Vector3f& query, float radius) const;
   /// Indices of every point within `radius` [m] of `query` (cleared first), unordered.
   void within(const Eigen::Vector3f& query, float radius, std::vector<size_t>& indices) const;
+  /// Whether some point within `radius` [m] of `query` satisfies `test(index)`; the search stops
+  /// at the first that does.
+  bool any_within(const Eigen::Vector3f& query, float radius, const std::function<bool(size_t)>& test) const;
   const std::vector<Eigen::Vector3f>& points() const;
   size_t size() const { return points().size(); }
 
