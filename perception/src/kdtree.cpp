@@ -70,10 +70,13 @@ class CellRows {
  public:
   /// None when the rows would need more than `max_rows` entries.
   static std::optional<CellRows> build(const std::vector<Eigen::Vector3f>& p, float cell, size_t max_rows) {
-    if (p.empty() || !(cell > 0)) return std::nullopt;
+    // (Its indices are 32-bit; a point not finite has no cell: the tree answers for such clouds.)
+    if (p.empty() || p.size() > std::numeric_limits<uint32_t>::max() || !(cell > 0)) return std::nullopt;
     Eigen::Vector3f lo = p.front(), hi = p.front();
-    for (const auto& x : p) lo = lo.cwiseMin(x), hi = hi.cwiseMax(x);
-    if (!lo.allFinite() || !hi.allFinite()) return std::nullopt;
+    for (const auto& x : p) {
+      if (!x.allFinite()) return std::nullopt;
+      lo = lo.cwiseMin(x), hi = hi.cwiseMax(x);
+    }
     CellRows g;
     g.cell_ = cell;
     g.lo_ = lo;

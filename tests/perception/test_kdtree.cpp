@@ -150,8 +150,11 @@ TEST(KdTree3, TheGridOfCellsFindsWhatBruteForceFinds) {
   EXPECT_EQ(two.nearest_within({0.9f, 0, 0}, 0.25f)->first, 1u);
 }
 
-// Points so far apart that a grid of small cells would need too many rows: the tree answers.
-TEST(KdTree3, PointsTooFarApartForTheGridAreStillFound) {
+// Clouds a grid cannot index (points so far apart that small cells would need too many rows; a
+// point not finite): the tree answers.
+TEST(KdTree3, CloudsTheGridCannotIndexAreAnsweredByTheTree) {
+  const KdTree3 with_nan({{0, 0, 0}, {std::numeric_limits<float>::quiet_NaN(), 0, 0}, {0.5f, 0, 0}}, 0.25f);
+  EXPECT_EQ(with_nan.nearest_within({0.4f, 0, 0}, 0.25f)->first, 2u);
   const std::vector<Eigen::Vector3f> points = {{0, 0, 0}, {0.001f, 0, 0}, {0, 5000, 5000}, {0, 5000.002f, 5000}};
   const KdTree3 tree(points, 0.001f);
   EXPECT_EQ(tree.nearest_within({0.0009f, 0, 0}, 0.001f)->first, 1u);
