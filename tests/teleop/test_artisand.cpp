@@ -1,7 +1,7 @@
 // artisand as a process, its clients in other processes, over real UDP multicast inside a
 // private network namespace (nothing can leave the machine): scene from LCM alone, the
-// `artisan teleop` client (with a robot checked at joint values), malformed messages,
-// lcm-logger/lcm-logplayer, SIGTERM and restart.
+// `artisan teleop` client (with a robot checked at joint values, and an object reported ambiguous
+// shown with its alternative), malformed messages, lcm-logger/lcm-logplayer, SIGTERM and restart.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/prctl.h>
@@ -63,9 +63,13 @@ TEST(Artisand, AcrossProcessesInAPrivateNetworkNamespace) {
   test::TempDir dir;
   const auto db = (dir / "ws.db").string();
   test::WorldFixture f;
+  // And a second bunny, reported ambiguous with a pipe, away from where the robot reaches.
+  const Transform T_world_alternative = Transform(Eigen::Translation3d(-0.5, -0.6, 0.02)) * Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY());
+  worldmodel::ObjectId ambiguous = 0;
   {
     auto ws = worldmodel::Workspace::create(db);
     f = test::make_world_fixture(ws);
+    ambiguous = test::add_ambiguous_bunny(ws, f, "pipe_350", T_world_alternative, {-0.6, -0.6, 0});
   }
   // A UR5 5 cm above the floor, its arm out straight (by the command line, as an operator would).
   const auto set = test::run_command(std::string(ARTISAN_CLI) + " --db " + db + " robot set /cell --urdf '" + test::ur5_urdf().string() +
@@ -79,7 +83,7 @@ TEST(Artisand, AcrossProcessesInAPrivateNetworkNamespace) {
   {
     SceneClient client(lcm, "netns-client");
     ASSERT_TRUE(client.wait_for_scene(20));
-    ASSERT_EQ(client.objects().size(), 2u);
+    ASSERT_EQ(client.objects().size(), 3u);
     ASSERT_TRUE(client.objects().at(f.bunny).mesh);
     EXPECT_TRUE(*client.objects().at(f.bunny).mesh == f.bunny_mesh);
 
@@ -103,7 +107,25 @@ TEST(Artisand, AcrossProcessesInAPrivateNetworkNamespace) {
   // The command-line client, in its own process.
   auto scene = test::run_command(cli + " --json teleop --lcm-url '" + kUrl + "' scene");
   ASSERT_EQ(scene.exit_code, 0) << scene.err;
-  EXPECT_EQ(nlohmann::json::parse(scene.out)["objects"].size(), 2u);
+  const auto objects = nlohmann::json::parse(scene.out)["objects"];
+  ASSERT_EQ(objects.size(), 3u);
+  for (const auto& o : objects) {  // the ambiguous one names its alternative and where it would be
+    if (o["id"] != ambiguous) {
+      EXPECT_FALSE(o["ambiguous"].get<bool>()) << o;
+      EXPECT_FALSE(o.contains("alternative_model")) << o;
+      continue;
+    }
+    EXPECT_TRUE(o["ambiguous"].get<bool>()) << o;
+    EXPECT_EQ(o["alternative_model"], "pipe_350");
+    const auto at = o["T_world_alternative"].get<std::vector<double>>();
+    ASSERT_EQ(at.size(), 7u);
+    const Eigen::Quaterniond q(T_world_alternative.rotation());
+    const std::vector<double> expected = {-0.5, -0.6, 0.02, q.x(), q.y(), q.z(), q.w()};
+    for (size_t k = 0; k < 7; ++k) EXPECT_NEAR(at[k], expected[k], 1e-9) << k;
+  }
+  const auto plain = test::run_command(cli + " teleop --lcm-url '" + kUrl + "' scene");
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  EXPECT_NE(plain.out.find("AMBIGUOUS (pipe_350 fits as well)"), std::string::npos) << plain.out;
   auto grasps = test::run_command(cli + " --json teleop --lcm-url '" + kUrl + "' grasps " + std::to_string(f.bunny));
   ASSERT_EQ(grasps.exit_code, 0) << grasps.err;
   EXPECT_EQ(nlohmann::json::parse(grasps.out).size(), 1u);

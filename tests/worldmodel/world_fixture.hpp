@@ -86,11 +86,12 @@ inline WorldFixture make_world_fixture(worldmodel::Workspace& ws) {
   return f;
 }
 
-/// A second recognition of the bunny in /cell, 0.3 m along x from the first, reported ambiguous
-/// with `alternative_model` at `T_world_alternative` (as the recognizer stores one); its ID.
+/// A second recognition of the bunny in /cell, `offset` [m] from the first (0.3 m along x unless
+/// said), reported ambiguous with `alternative_model` at `T_world_alternative` (as the recognizer
+/// stores one); its ID.
 inline worldmodel::ObjectId add_ambiguous_bunny(worldmodel::Workspace& ws, const WorldFixture& f, const std::string& alternative_model,
-                                                const Transform& T_world_alternative) {
-  auto r = recognized_bunny(f, "bunny-in-merged-2", Transform(Eigen::Translation3d(0.3, 0, 0)) * f.T_world_bunny,
+                                                const Transform& T_world_alternative, const Eigen::Vector3d& offset = {0.3, 0, 0}) {
+  auto r = recognized_bunny(f, "bunny-in-merged-2", Transform(Eigen::Translation3d(offset)) * f.T_world_bunny,
                             {{"score", 0.5}, {"overlap", 0.3}, {"rmse_m", 0.0005}, {"ambiguous", true}, {"alternative_model", alternative_model}});
   r.metadata["T_scene_model_alternative"] = to_row_major(T_world_alternative);
   return ws.add(ws.resolve("/cell").id, r);
