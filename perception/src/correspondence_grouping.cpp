@@ -89,10 +89,6 @@ GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tg
   for (size_t a = 0; a < n; ++a)
     for (size_t b = a + 1; b < n; ++b)
       pair[a * n + b] = before[a] != kNew && before[b] != kNew ? measured(a, b) : agreement(src, tgt, candidates[a], candidates[b], gamma, t_gc);
-  if (reuse) {
-    reuse->candidates = candidates;
-    reuse->pair = pair;  // a copy: the grouping below reads it
-  }
   std::vector<size_t> kept, support(n, 0);
   for (size_t a = 0; a < n; ++a)
     for (size_t b = a + 1; b < n; ++b)
@@ -128,6 +124,10 @@ GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tg
     g.size = group.size();
     g.T_target_source = transform_from(src, tgt, g.members);
     result.groups.push_back(std::move(g));
+  }
+  if (reuse) {  // for the next grouping
+    reuse->candidates = std::move(candidates);
+    reuse->pair = std::move(pair);
   }
   return result;
 }

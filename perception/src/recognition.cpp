@@ -1578,6 +1578,12 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     found.visible_explained = top.seen->explained;
     found.occluded_fraction = top.seen->occluded;
     found.continued_fraction = top.seen->continued;
+    const auto ambiguous_with = [&](size_t m, const Transform& T) {
+      found.ambiguous = true;
+      found.alternative_model = library.model_name(m);
+      found.alternative_model_index = m;
+      found.T_scene_model_alternative = T;
+    };
     // Ambiguous with another model: its search's winner (which passes the tests and lies on no
     // accepted instance) explains nearly all of the scene surface this one newly explains; the one
     // that explains most of it. A tee whose branch is hidden and a pipe on its run are told apart
@@ -1591,10 +1597,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         const auto shared = static_cast<size_t>(std::count_if(other.gain.begin(), other.gain.end(), [&](size_t p) { return gained[p] != 0; }));
         if (shared <= most || static_cast<double>(shared) < (1 - params.ambiguity_margin) * static_cast<double>(next->gain.size())) continue;
         most = shared;
-        found.ambiguous = true;
-        found.alternative_model = library.model_name(other.m);
-        found.alternative_model_index = other.m;
-        found.T_scene_model_alternative = other.verified[*other.winner].T;
+        ambiguous_with(other.m, other.verified[*other.winner].T);
       }
     }
     // Ambiguous, failing that: another pose at the same place that puts the model's surface
@@ -1613,12 +1616,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       std::stable_sort(rivals.begin(), rivals.end(), [](const IcpResult* a, const IcpResult* b) { return a->overlap_fraction > b->overlap_fraction; });
       for (size_t k = 0; k < rivals.size() && k < 3 && !found.ambiguous; ++k) {
         const Transform& T = rivals[k]->T_target_source;
-        if (passes(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model, T)) {
-          found.ambiguous = true;
-          found.alternative_model = found.model;
-          found.alternative_model_index = found.model_index;
-          found.T_scene_model_alternative = T;
-        }
+        if (passes(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model, T)) ambiguous_with(next->m, T);
       }
     }
     result.instances.push_back(found);

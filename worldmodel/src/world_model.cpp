@@ -4,6 +4,7 @@
 #include <chrono>
 #include <ctime>
 #include <functional>
+#include <optional>
 #include <set>
 
 #include "artisan/core/error.hpp"
@@ -181,11 +182,15 @@ SceneObject WorldModel::scene_object(const ObjectInfo& o, const std::map<ObjectI
   const auto& model = model_it->second;
   s.model = model.name;
   // Where the scene the object was recognized in lies (identity for one added by an operator);
-  // looked up only when needed (an object an operator placed has its world pose stored).
-  const auto T_world_scene = [&] {
-    if (const auto prov = ws_.provenance(o.id); prov && !prov->inputs.empty())
-      if (auto it = T_world_mesh.find(prov->inputs.front()); it != T_world_mesh.end()) return it->second;
-    return Transform(Transform::Identity());
+  // looked up only when needed (an object an operator placed has its world pose stored), once.
+  std::optional<Transform> world_scene;
+  const auto T_world_scene = [&]() -> const Transform& {
+    if (!world_scene) {
+      world_scene = Transform::Identity();
+      if (const auto prov = ws_.provenance(o.id); prov && !prov->inputs.empty())
+        if (auto it = T_world_mesh.find(prov->inputs.front()); it != T_world_mesh.end()) world_scene = it->second;
+    }
+    return *world_scene;
   };
   if (md.contains("T_world_object")) s.T_world_object = transform_from_json(md["T_world_object"], o.path);
   else s.T_world_object = T_world_scene() * transform_from_json(md.at("T_scene_model"), o.path);
