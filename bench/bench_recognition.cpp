@@ -340,6 +340,8 @@ int main(int argc, char** argv) {
       else if (k == "max_through_fraction") tuned.max_through_fraction = v;
       else if (k == "no_votes_on_support") tuned.no_votes_on_support = v != 0;
       else if (k == "axis_hypotheses") tuned.axis_hypotheses = v != 0;
+      else if (k == "round_part_hypotheses") tuned.round_part_hypotheses = v != 0;
+      else if (k == "round_part_min_share") library_params.round_part_min_share = v;
       else if (k == "drop_refused_planes") tuned.drop_refused_planes = v != 0;
       else if (k == "cylinder_min_share") library_params.cylinder_min_share = v;
       else if (k == "axis_min_points") tuned.axis_min_points = size_t(v);
@@ -575,6 +577,7 @@ int main(int argc, char** argv) {
                        best->source == RecognitionCandidate::Source::voting  ? "voting"
                        : best->source == RecognitionCandidate::Source::pairs ? "pairs"
                        : best->source == RecognitionCandidate::Source::axis  ? "axis"
+                       : best->source == RecognitionCandidate::Source::round_part ? "round part"
                                                                              : "grouping",
                        rank_best, best->overlap_fraction, best->rmse_m * 1e3, best->free_space_fraction, best->visible_explained, best->occluded_fraction,
                        best->continued_fraction, best->correspondences);

@@ -42,15 +42,61 @@ std::optional<ModelCylinder> model_cylinder(const PointCloud& model, const Eigen
   c.radius = outer[outer.size() / 2];
   const auto near_radius = std::count_if(outer.begin(), outer.end(), [&](double r) { return std::abs(r - c.radius) <= res; });
   if (2 * static_cast<size_t>(near_radius) < outer.size()) return std::nullopt;
-  // Round: a turn that is no symmetry of the facets (2 pi / 7) keeps every point on the surface.
+  c.round = round_about(model, c.point, c.direction, res);
+  return c;
+}
+
+std::vector<ModelCylinder> model_round_parts(const PointCloud& model, const Eigen::Vector3d& axis_point, const Eigen::Vector3d& axis_direction,
+                                             double res, double min_share) {
+  std::vector<ModelCylinder> parts;
+  if (model.points.empty() || model.normals.size() != model.points.size()) return parts;
+  const Eigen::Vector3d a = axis_direction.normalized();
+  // The outward-facing points on cylinders about the axis: (radius, position along it).
+  std::vector<std::pair<double, double>> outer;
+  for (size_t i = 0; i < model.points.size(); ++i) {
+    const Eigen::Vector3d p = model.points[i].cast<double>() - axis_point;
+    const double along = p.dot(a);
+    const Eigen::Vector3d radial = p - along * a;
+    const double r = radial.norm();
+    if (r < 3 * res || std::abs(model.normals[i].cast<double>().dot(a)) > 0.2 || model.normals[i].cast<double>().dot(radial / r) < 0.95) continue;
+    outer.emplace_back(r, along);
+  }
+  std::sort(outer.begin(), outer.end());
+  bool round = false, round_known = false;
+  for (size_t first = 0; first < outer.size();) {
+    size_t last = first;
+    while (last < outer.size() && outer[last].first - outer[first].first <= res) ++last;
+    const double share = static_cast<double>(last - first) / static_cast<double>(model.points.size());
+    ModelCylinder c;
+    c.point = axis_point;
+    c.direction = a;
+    c.radius = outer[first + (last - first) / 2].first;
+    c.start = std::numeric_limits<double>::max();
+    c.end = std::numeric_limits<double>::lowest();
+    for (size_t k = first; k < last; ++k) c.start = std::min(c.start, outer[k].second), c.end = std::max(c.end, outer[k].second);
+    c.share = share;
+    first = last;
+    if (share < min_share || c.end - c.start < c.radius) continue;
+    if (!round_known) round = round_about(model, axis_point, a, res), round_known = true;
+    if (!round) return {};
+    c.round = true;
+    parts.push_back(c);
+  }
+  std::sort(parts.begin(), parts.end(), [](const ModelCylinder& x, const ModelCylinder& y) { return x.share > y.share; });
+  return parts;
+}
+
+bool round_about(const PointCloud& model, const Eigen::Vector3d& axis_point, const Eigen::Vector3d& axis_direction, double res) {
+  // A turn that is no symmetry of the facets (2 pi / 7) keeps every point on the surface.
   const KdTree3 tree(model.points);
   const Eigen::Isometry3f turn =
-      (Eigen::Translation3d(c.point) * Eigen::AngleAxisd(2 * std::numbers::pi / 7, c.direction) * Eigen::Translation3d(-c.point)).cast<float>();
+      (Eigen::Translation3d(axis_point) * Eigen::AngleAxisd(2 * std::numbers::pi / 7, axis_direction.normalized()) * Eigen::Translation3d(-axis_point))
+          .cast<float>();
   const auto tolerance2 = static_cast<float>(std::pow(1.5 * res, 2));
   const size_t step = std::max<size_t>(1, model.points.size() / 64);
-  c.round = true;
-  for (size_t i = 0; i < model.points.size() && c.round; i += step) c.round = tree.nearest(turn * model.points[i]).second <= tolerance2;
-  return c;
+  for (size_t i = 0; i < model.points.size(); i += step)
+    if (tree.nearest(turn * model.points[i]).second > tolerance2) return false;
+  return true;
 }
 
 namespace {

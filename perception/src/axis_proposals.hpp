@@ -36,6 +36,17 @@ struct ModelCylinder {
 std::optional<ModelCylinder> model_cylinder(const PointCloud& model, const Eigen::Vector3d& axis_point, const Eigen::Vector3d& axis_direction,
                                             double res, double min_share);
 
+/// The round parts of a model that is not mostly one cylinder (a flange's neck): cylinders about
+/// the axis (outward normals, one radius within a spacing) holding at least `min_share` of its
+/// points, at least 3 spacings in radius and at least their radius long (a shorter band, such as
+/// a flange's rim, fixes no axis where it is seen), about which the whole model is round; their
+/// start and end are the part's extent. Largest first.
+std::vector<ModelCylinder> model_round_parts(const PointCloud& model, const Eigen::Vector3d& axis_point, const Eigen::Vector3d& axis_direction,
+                                             double res, double min_share);
+
+/// Whether turning the model about the axis maps its surface onto itself (within 1.5 `res`).
+bool round_about(const PointCloud& model, const Eigen::Vector3d& axis_point, const Eigen::Vector3d& axis_direction, double res);
+
 /// The axis of a cylindrical piece of the scene's surface.
 struct SceneAxis {
   Eigen::Vector3d point = Eigen::Vector3d::Zero();      ///< on the axis, at the middle of the seen extent

@@ -656,7 +656,8 @@ std::vector<PoseHypothesis> voting_hypotheses(const detail::PairFeatureModel& ta
 // support and at least 90% of the best there (a pipe partly hidden fits equally well at every
 // shift that keeps its seen part on the scene: the visibility tests choose among them).
 std::vector<PoseHypothesis> axis_hypotheses(const detail::ModelCylinder& cylinder, const std::vector<detail::SceneAxis>& axes,
-                                            const SurfaceSupport& surface_support, double res, const RecognitionParams& params) {
+                                            const SurfaceSupport& surface_support, double res, const RecognitionParams& params,
+                                            RecognitionCandidate::Source source = RecognitionCandidate::Source::axis) {
   std::vector<PoseHypothesis> made;
   const size_t min_support = surface_support.min_support(params.pair_min_support);
   for (const auto& axis : axes) {
@@ -666,7 +667,7 @@ std::vector<PoseHypothesis> axis_hypotheses(const detail::ModelCylinder& cylinde
     for (size_t k = 0; k < poses.size(); ++k) {
       PoseHypothesis& h = on[k];
       h.T_scene_model = poses[k];
-      h.source = RecognitionCandidate::Source::axis;
+      h.source = source;
       h.first_support = h.support = surface_support.first(poses[k], 1.5 * res);
     }
     size_t best = 0;
@@ -1042,7 +1043,7 @@ void SpinImageLibrary::add_precomputed_model(const std::string& name, PointCloud
     throw Error("spin-image library: precomputed model \"" + name + "\" has " + std::to_string(images.rows()) + " x " +
                 std::to_string(images.cols()) + " spin images for " + std::to_string(points.points.size()) + " points; expected " +
                 std::to_string(bins()) + " rows");
-  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}, {}, 0});
+  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}, {}, {}, 0});
   compressed_ = false;
 }
 
@@ -1078,6 +1079,14 @@ void SpinImageLibrary::compress() {
                                               params_.cylinder_min_share);
         if (c && (!m.cylinder || c->share > m.cylinder->share)) m.cylinder = std::make_shared<const detail::ModelCylinder>(*c);
       }
+      // Else, the round parts about its turn axes.
+      std::vector<detail::ModelCylinder> parts;
+      for (size_t a = 0; a < 3 && !m.cylinder; ++a) {
+        const auto p = detail::model_round_parts(m.points, m.turns->points[a], m.turns->directions.col(static_cast<Eigen::Index>(a)),
+                                                 params_.resolution_m, params_.round_part_min_share);
+        parts.insert(parts.end(), p.begin(), p.end());
+      }
+      m.round_parts = std::make_shared<const std::vector<detail::ModelCylinder>>(std::move(parts));
       uint64_t state = 0x9e3779b97f4a7c15ull;
       m.planar_points = largest_plane(m.points, std::vector<char>(m.points.points.size(), 0), params_.resolution_m, state).count;
     }
@@ -1352,22 +1361,25 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
           h.lies_on = s.surface_support->lies_on(h.T_scene_model, (h.source == RecognitionCandidate::Source::grouping ? 2.0 : 1.5) * res);
         h.support = SurfaceSupport::count(*h.lies_on, s.unusable);
       }
-    std::vector<Start> groups, pairs;
+    std::vector<Start> groups, pairs, parts;
     for (auto& h : s.hypotheses) {
       if (h.done) continue;
-      const bool group = h.source == RecognitionCandidate::Source::grouping;
       if (2 * h.support < h.first_support) h.done = true;
-      else (group ? groups : pairs).push_back({h.support, &h});
+      else if (h.source == RecognitionCandidate::Source::grouping) groups.push_back({h.support, &h});
+      else (h.source == RecognitionCandidate::Source::round_part ? parts : pairs).push_back({h.support, &h});
     }
-    // Groups and pair hypotheses are ranked apart: the pairs were chosen for their support and
-    // would crowd out the groups.
+    // Groups, pair hypotheses and round parts' are ranked apart: the pairs were chosen for their
+    // support and would crowd out the groups; a flange's neck has less support than the flange's
+    // face on a box top.
     const auto keep_best = [&](std::vector<Start>& v) {
       std::stable_sort(v.begin(), v.end(), [](const Start& a, const Start& b) { return a.support > b.support; });
       v.resize(std::min(v.size(), static_cast<size_t>(std::max(params.coarse_refined, 0))));
     };
     keep_best(groups);
     keep_best(pairs);
+    keep_best(parts);
     groups.insert(groups.end(), pairs.begin(), pairs.end());
+    groups.insert(groups.end(), parts.begin(), parts.end());
     return groups;
   };
   // The best starting poses are refined by the coarse ICP; in score order, the first that passes
@@ -1426,8 +1438,10 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         v.T = v.icp.T_target_source;
         v.seen.emplace(free_space.check(model, v.T));
         // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
-        // what keeps the pose from passing.
-        if (const auto* cylinder = library.cylinder(s.m); cylinder && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, near_passing))
+        // what keeps the pose from passing; so is a flange's along its neck's (with round_part_hypotheses).
+        const auto& parts = library.round_parts(s.m);
+        const auto* cylinder = library.cylinder(s.m) ? library.cylinder(s.m) : params.round_part_hypotheses && !parts.empty() ? &parts[0] : nullptr;
+        if (cylinder && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, near_passing))
           if (auto slid = slid_along_axis(model, *cylinder, v.T, scene_points, scene_tree, free_space, fine, params, res, passes))
             v.move_to(*slid);
         // A part the ICP fits to the scene (its overlap and residual pass) that the visibility tests
@@ -1548,6 +1562,11 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       made.insert(made.end(), std::make_move_iterator(on_axes.begin()), std::make_move_iterator(on_axes.end()));
     }
     for (auto& h : best_distinct(std::move(made), *s.same, static_cast<size_t>(std::max(params.pair_pool, 0)))) s.hypotheses.push_back(std::move(h));
+    // Round parts' hypotheses are ranked apart (below), so none is crowded out of the pool.
+    if (params.round_part_hypotheses)
+      for (const auto& part : library.round_parts(m))
+        for (auto& h : axis_hypotheses(part, scene_axes(part.radius), *s.surface_support, res, params, RecognitionCandidate::Source::round_part))
+          s.hypotheses.push_back(std::move(h));
   }
   result.seconds_hypotheses = since(t0);
   while (true) {

@@ -1,12 +1,13 @@
 // Cylinder-axis pose proposals (the private stage recognition uses for parts made mostly of one
-// cylinder) against analytic ground truth. Method: the simulator's DN50 pipe (60.3 mm outside,
-// 3.9 mm wall, 350 mm long, along z) resampled at 3 mm; its cylinder must be found about z with
+// cylinder, and for round parts' cylinders: a flange's neck) against analytic ground truth.
+// Method: the simulator's DN50 pipe (60.3 mm outside, 3.9 mm wall, 350 mm long, along z) resampled at 3 mm; its cylinder must be found about z with
 // the outer radius and the length, and the tee, elbow and flange must have none. The pipe's
 // sensor-facing half (a sensor above) at a known pose, beside a floor plane, a box and a
 // thicker cylinder, is the scene: exactly one axis of the pipe's radius must be found, on the
 // pipe's axis, with the seen extent; and among the poses on it one must put the pipe within a
 // shift step of its true place. Half the pipe hidden: the extent shrinks to what is seen, and
-// a proposal still lies at the true place.
+// a proposal still lies at the true place. A flange's neck is its one round part (its rim too
+// short), the tee and elbow have none; a flange seen edge on is proposed on its neck's axis.
 #include <gtest/gtest.h>
 
 #include <functional>
@@ -137,11 +138,59 @@ TEST(AxisProposals, APartThatIsNotRoundIsTurnedAboutTheAxis) {
   EXPECT_TRUE(detail::poses_on_axis(*tee, axis, 0.0, 12).empty()) << "a step must be positive";
 }
 
+std::vector<detail::ModelCylinder> round_parts_about_z(const TriangleMesh& mesh) {
+  return detail::model_round_parts(sample_surface(mesh, kRes), Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ(), kRes, 0.1);
+}
+
+TEST(AxisProposals, AFlangesNeckIsARoundPartAndItsRimIsNot) {
+  // The flange: a ring 165 mm across and 20 mm thick, its neck the pipe's radius and 60 mm long.
+  const auto parts = round_parts_about_z(sim::make_flange(0.165, 0.02, 0.06));
+  ASSERT_EQ(parts.size(), 1u) << "the rim (82.5 mm in radius, 20 mm long) is too short to fix an axis";
+  EXPECT_NEAR(parts[0].radius, kRadius, 1e-3);
+  EXPECT_NEAR(parts[0].start, 0.02, kRes);  // the samples lie within a spacing of the ends
+  EXPECT_NEAR(parts[0].end, 0.08, kRes);
+  EXPECT_TRUE(parts[0].round);
+  EXPECT_GT(parts[0].share, 0.1);
+  EXPECT_TRUE(round_parts_about_z(sim::make_tee(0.22, 0.11)).empty()) << "a tee is not round about its run";
+  EXPECT_TRUE(round_parts_about_z(sim::make_elbow(0.076)).empty());
+}
+
+TEST(AxisProposals, AFlangeSeenEdgeOnIsProposedOnItsNecksAxis) {
+  // A flange lying on its side (its axis along x), seen from above: of its surface only what
+  // faces up, its face and back edge on. Its neck's axis must be found, and a pose on it must
+  // put the flange at its place.
+  const TriangleMesh flange = sim::make_flange(0.165, 0.02, 0.06);
+  const auto parts = round_parts_about_z(flange);
+  ASSERT_EQ(parts.size(), 1u);
+  Transform T_scene_flange = Transform::Identity();
+  T_scene_flange.linear() = Eigen::AngleAxisd(std::numbers::pi / 2, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  T_scene_flange.translation() = Eigen::Vector3d(0.03, -0.02, 0.0);
+  Scene scene;
+  const PointCloud points = sample_surface(flange, kRes);
+  for (size_t i = 0; i < points.points.size(); ++i) {
+    const Eigen::Vector3f n = (T_scene_flange.linear() * points.normals[i].cast<double>()).cast<float>();
+    if (n.z() > 0.1f && points.points[i].head<2>().norm() > 0.028f)
+      scene.points.points.push_back((T_scene_flange * points.points[i].cast<double>()).cast<float>()), scene.points.normals.push_back(n);
+  }
+  scene.ignore.assign(scene.points.points.size(), 0);
+  const KdTree3 tree(scene.points.points);
+  const auto axes = detail::scene_axes(scene.points, tree, parts[0].radius, kRes, scene.ignore, 60);
+  ASSERT_FALSE(axes.empty());
+  double best_angle = 180, best_across = 1, best_along = 1;
+  for (const auto& a : axes)
+    for (const auto& T : detail::poses_on_axis(parts[0], a, 2 * kRes, 12)) {
+      const auto e = axis_error(T, T_scene_flange);
+      if (e.angle_deg < 2.0 && e.across_m < 2e-3 && e.along_m < best_along) best_angle = e.angle_deg, best_across = e.across_m, best_along = e.along_m;
+    }
+  EXPECT_LT(best_along, kRes + 2e-3) << "angle " << best_angle << " deg, " << best_across * 1e3 << " mm across";
+}
+
 TEST(AxisProposals, NoAxesWithoutNormalsOrPoints) {
   PointCloud empty;
   const KdTree3 tree(empty.points);
   EXPECT_TRUE(detail::scene_axes(empty, tree, kRadius, kRes, {}, 60).empty());
   EXPECT_FALSE(detail::model_cylinder(empty, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ(), kRes, 0.8).has_value());
+  EXPECT_TRUE(detail::model_round_parts(empty, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ(), kRes, 0.1).empty());
 }
 
 }  // namespace

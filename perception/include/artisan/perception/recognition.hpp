@@ -47,6 +47,11 @@ struct ModelLibraryParams {
   /// straight pipe: its outside and bore) is also proposed on the scene's cylinder axes of its
   /// radius (RecognitionParams::axis_hypotheses).
   double cylinder_min_share = 0.8;
+  /// A model that is not mostly one cylinder but round about one of its turn axes, with a
+  /// cylinder about it holding at least this share of its points and at least its radius long
+  /// (a flange's neck), is also proposed on the scene's cylinder axes of that radius
+  /// (RecognitionParams::round_part_hypotheses).
+  double round_part_min_share = 0.1;
 };
 
 class SpinImageLibrary {
@@ -82,6 +87,8 @@ class SpinImageLibrary {
   const detail::TurnAxes& turn_axes(size_t m) const { return *models_[m].turns; }
   /// Model m's cylinder (ModelLibraryParams::cylinder_min_share), or null (made by compress()).
   const detail::ModelCylinder* cylinder(size_t m) const { return models_[m].cylinder.get(); }
+  /// Model m's round parts (ModelLibraryParams::round_part_min_share), largest first (made by compress()).
+  const std::vector<detail::ModelCylinder>& round_parts(size_t m) const { return *models_[m].round_parts; }
   /// Points of model m on its largest plane (a flange's face; made by compress()).
   size_t planar_points(size_t m) const { return models_[m].planar_points; }
 
@@ -103,6 +110,7 @@ class SpinImageLibrary {
     std::shared_ptr<const detail::PairFeatureModel> pairs;
     std::shared_ptr<const detail::TurnAxes> turns;
     std::shared_ptr<const detail::ModelCylinder> cylinder;
+    std::shared_ptr<const std::vector<detail::ModelCylinder>> round_parts;
     size_t planar_points = 0;
   };
   ModelLibraryParams params_;
@@ -165,6 +173,16 @@ struct RecognitionParams {
   /// continued past the model's outline against the 3% limit.
   int axis_slide_steps = 5;
   size_t axis_min_points = 60;         ///< [1] scene points a cylinder axis needs
+  /// A model round about an axis with a cylindrical part (SpinImageLibrary::round_parts, a
+  /// flange's neck) is also put with that part on each of the scene's cylinder axes of its
+  /// radius, as a pipe is; those poses are ranked apart from the pair hypotheses (up to
+  /// coarse_refined of them), which outnumber them; and a refused pose of it that the
+  /// visibility tests alone refuse by a small margin is slid along that axis as a pipe's is
+  /// (axis_slide_steps). A flange lying neck down with its face
+  /// turned from the sensor shows the sensor its face edge on, a strip of rim and its neck: of
+  /// the 8 flanges the held-out clutter scenes missed, 6 lay so, and neither spin images nor
+  /// point-pair voting put any pose within a third of its diameter of them.
+  bool round_part_hypotheses = true;
   /// [1] starting poses refined by the coarse ICP per instance search, of the groups and of the
   /// pair hypotheses each: those that put the most sampled model points on scene surface not yet
   /// explained
@@ -344,7 +362,7 @@ struct RecognitionCandidate {
   double support_planarity = 0;   ///< 1: the scene surface it explains is one plane
   double through_fraction = 0;    ///< [1] share of it on the less of the two sides of a solid's face it goes through (max_through_fraction)
   size_t correspondences = 0;     ///< in its group; for a pair or voting hypothesis, the sampled model points it put on the scene
-  enum class Source { grouping, pairs, voting, axis } source = Source::grouping;
+  enum class Source { grouping, pairs, voting, axis, round_part } source = Source::grouping;
   /// proposed: a pair or voting hypothesis in the pool that no coarse ICP refined; coarse: not
   /// checked at its pose (refined by the coarse ICP only; refused by the screen for its overlap
   /// alone; or a rival whose fine ICP failed the residual or the overlap floor)
