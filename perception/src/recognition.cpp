@@ -651,10 +651,11 @@ std::vector<PoseHypothesis> voting_hypotheses(const detail::PairFeatureModel& ta
   return made;
 }
 
-// Hypotheses of a model made mostly of one cylinder on the scene's cylinder axes of its radius
-// (RecognitionParams::axis_hypotheses), scored by SurfaceSupport: per axis, those with enough
-// support and at least 90% of the best there (a pipe partly hidden fits equally well at every
-// shift that keeps its seen part on the scene: the visibility tests choose among them).
+// Hypotheses of a model made mostly of one cylinder (RecognitionParams::axis_hypotheses), or of
+// a round part of one (round_part_hypotheses: `source` round_part), on the scene's cylinder axes
+// of the cylinder's radius, scored by SurfaceSupport: per axis, those with enough support and at
+// least 90% of the best there (a pipe partly hidden fits equally well at every shift that keeps
+// its seen part on the scene: the visibility tests choose among them).
 std::vector<PoseHypothesis> axis_hypotheses(const detail::ModelCylinder& cylinder, const std::vector<detail::SceneAxis>& axes,
                                             const SurfaceSupport& surface_support, double res, const RecognitionParams& params,
                                             RecognitionCandidate::Source source = RecognitionCandidate::Source::axis) {
