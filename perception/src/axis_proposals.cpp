@@ -89,9 +89,8 @@ std::vector<ModelCylinder> model_round_parts(const PointCloud& model, const Eige
 bool round_about(const PointCloud& model, const Eigen::Vector3d& axis_point, const Eigen::Vector3d& axis_direction, double res) {
   // A turn that is no symmetry of the facets (2 pi / 7) keeps every point on the surface.
   const KdTree3 tree(model.points);
-  const Eigen::Isometry3f turn =
-      (Eigen::Translation3d(axis_point) * Eigen::AngleAxisd(2 * std::numbers::pi / 7, axis_direction.normalized()) * Eigen::Translation3d(-axis_point))
-          .cast<float>();
+  const Eigen::AngleAxisd seventh(2 * std::numbers::pi / 7, axis_direction.normalized());
+  const Eigen::Isometry3f turn = (Eigen::Translation3d(axis_point) * seventh * Eigen::Translation3d(-axis_point)).cast<float>();
   const auto tolerance2 = static_cast<float>(std::pow(1.5 * res, 2));
   const size_t step = std::max<size_t>(1, model.points.size() / 64);
   for (size_t i = 0; i < model.points.size(); i += step)

@@ -180,7 +180,8 @@ TEST(AxisProposals, AFlangeSeenEdgeOnIsProposedOnItsNecksAxis) {
   for (const auto& a : axes)
     for (const auto& T : detail::poses_on_axis(parts[0], a, 2 * kRes, 12)) {
       const auto e = axis_error(T, T_scene_flange);
-      if (e.angle_deg < 2.0 && e.across_m < 2e-3 && e.along_m < best_along) best_angle = e.angle_deg, best_across = e.across_m, best_along = e.along_m;
+      if (e.angle_deg >= 2.0 || e.across_m >= 2e-3 || e.along_m >= best_along) continue;
+      best_angle = e.angle_deg, best_across = e.across_m, best_along = e.along_m;
     }
   EXPECT_LT(best_along, kRes + 2e-3) << "angle " << best_angle << " deg, " << best_across * 1e3 << " mm across";
 }
