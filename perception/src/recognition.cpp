@@ -1082,11 +1082,12 @@ void SpinImageLibrary::compress() {
       }
       // Else, the round parts about its turn axes.
       std::vector<detail::ModelCylinder> parts;
-      for (size_t a = 0; a < 3 && !m.cylinder; ++a) {
-        const auto p = detail::model_round_parts(m.points, m.turns->points[a], m.turns->directions.col(static_cast<Eigen::Index>(a)),
-                                                 params_.resolution_m, params_.round_part_min_share);
-        parts.insert(parts.end(), p.begin(), p.end());
-      }
+      if (!m.cylinder)
+        for (size_t a = 0; a < 3; ++a) {
+          const auto p = detail::model_round_parts(m.points, m.turns->points[a], m.turns->directions.col(static_cast<Eigen::Index>(a)),
+                                                   params_.resolution_m, params_.round_part_min_share);
+          parts.insert(parts.end(), p.begin(), p.end());
+        }
       m.round_parts = std::make_shared<const std::vector<detail::ModelCylinder>>(std::move(parts));
       uint64_t state = 0x9e3779b97f4a7c15ull;
       m.planar_points = largest_plane(m.points, std::vector<char>(m.points.points.size(), 0), params_.resolution_m, state).count;
@@ -1383,6 +1384,13 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     groups.insert(groups.end(), parts.begin(), parts.end());
     return groups;
   };
+  // The axis along which a refused pose of model m is slid: a pipe's, or (with
+  // round_part_hypotheses) its largest round part's; or none.
+  const auto slide_axis = [&](size_t m) -> const detail::ModelCylinder* {
+    if (const auto* cylinder = library.cylinder(m)) return cylinder;
+    const auto& parts = library.round_parts(m);
+    return params.round_part_hypotheses && !parts.empty() ? &parts.front() : nullptr;
+  };
   // The best starting poses are refined by the coarse ICP; in score order, the first that passes
   // the fine ICP and the visibility tests wins.
   const auto search = [&](Search& s) {
@@ -1439,11 +1447,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         v.T = v.icp.T_target_source;
         v.seen.emplace(free_space.check(model, v.T));
         // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
-        // what keeps the pose from passing; so is a flange's along its neck's (with round_part_hypotheses).
-        const auto& parts = library.round_parts(s.m);
-        const auto* cylinder = library.cylinder(s.m) ? library.cylinder(s.m) : params.round_part_hypotheses && !parts.empty() ? &parts[0] : nullptr;
-        if (cylinder && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, near_passing))
-          if (auto slid = slid_along_axis(model, *cylinder, v.T, scene_points, scene_tree, free_space, fine, params, res, passes))
+        // what keeps the pose from passing; so is a flange's along its neck's.
+        if (const auto* axis = slide_axis(s.m); axis && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, near_passing))
+          if (auto slid = slid_along_axis(model, *axis, v.T, scene_points, scene_tree, free_space, fine, params, res, passes))
             v.move_to(*slid);
         // A part the ICP fits to the scene (its overlap and residual pass) that the visibility tests
         // refuse may lie at the right place turned wrong about its run: a tee's branch or a valve's
