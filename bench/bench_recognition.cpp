@@ -301,6 +301,7 @@ int main(int argc, char** argv) {
       else if (k == "turn_margin") tuned.turn_margin = v;
       else if (k == "refused_turns") tuned.refused_turns = int(v);
       else if (k == "rivals") tuned.rivals = int(v);
+      else if (k == "losing_rivals_stay_open") tuned.losing_rivals_stay_open = v != 0;
       else if (k == "rival_margin") tuned.rival_margin = v;
       else if (k == "rival_coarse_slack") tuned.rival_coarse_slack = v;
       else if (k == "min_correlation") tuned.min_correlation = v;

@@ -1475,6 +1475,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // with were never refined: the winner passed first. A valve turned about its run or a pipe slid
     // along its axis passes as well as the true pose; the best of those rivals that passes and
     // fits better (the model's share on the scene, less its share in free space) takes its place.
+    // One that passes and loses may be a second instance beside the winner: with
+    // losing_rivals_stay_open the next search tries it again.
     const auto coarse_overlap = [&](const Transform& T) { return icp_point_to_plane(model, scene_points, scene_tree, T, coarse).overlap_fraction; };
     const size_t first_winner = *s.winner;
     double winner_coarse = coarse_overlap(s.verified[first_winner].T);
@@ -1503,6 +1505,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         const double score = v.icp.overlap_fraction - v.seen->free_space;
         if (score > to_beat && !taken(v.T)) to_beat = score, s.winner = rivals[j];
       }
+      if (params.losing_rivals_stay_open)
+        for (size_t j = 0; j < rivals.size(); ++j)
+          if (ok[j] && rivals[j] != *s.winner) s.verified[rivals[j]].origin->done = false;
       if (*s.winner != first_winner) winner_coarse = coarse_overlap(s.verified[*s.winner].T);
     }
     if (const auto* cylinder = library.cylinder(s.m)) {

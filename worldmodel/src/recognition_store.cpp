@@ -162,6 +162,7 @@ std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id,
                            {"turn_steps", params.turn_steps},
                            {"refused_turns", params.refused_turns},
                            {"rivals", params.rivals},
+                           {"losing_rivals_stay_open", params.losing_rivals_stay_open},
                            {"rival_margin", params.rival_margin},
                            {"max_shared_support", params.max_shared_support},
                            {"ambiguity_margin", params.ambiguity_margin}};
