@@ -1493,7 +1493,6 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
 #pragma omp parallel for schedule(dynamic, 1)
       for (size_t j = 0; j < rivals.size(); ++j) {
         auto& v = s.verified[rivals[j]];
-        v.origin->done = true;
         const Moved refined = refined_from(model, v.T, scene_points, scene_tree, free_space, fine, params, res, passes);
         v.move_to(refined);
         ok[j] = refined.passed;
@@ -1505,9 +1504,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         const double score = v.icp.overlap_fraction - v.seen->free_space;
         if (score > to_beat && !taken(v.T)) to_beat = score, s.winner = rivals[j];
       }
-      if (params.losing_rivals_stay_open)
-        for (size_t j = 0; j < rivals.size(); ++j)
-          if (ok[j] && rivals[j] != *s.winner) s.verified[rivals[j]].origin->done = false;
+      // The rivals tried are closed, but for one that passes and loses (losing_rivals_stay_open).
+      for (size_t j = 0; j < rivals.size(); ++j)
+        s.verified[rivals[j]].origin->done = !(params.losing_rivals_stay_open && ok[j] && rivals[j] != *s.winner);
       if (*s.winner != first_winner) winner_coarse = coarse_overlap(s.verified[*s.winner].T);
     }
     if (const auto* cylinder = library.cylinder(s.m)) {
