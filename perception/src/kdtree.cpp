@@ -61,15 +61,15 @@ struct FirstPassing {
   float worstDist() const { return radius_sq; }
 };
 
-// Cubic cells of one size over the points' bounding box, for queries no wider than a cell: the
-// points sorted into rows of cells along the box's longest axis (a row: the points of one pair of
-// cell indices on the two other axes, ordered along it), so that a query reads the few cells about
-// it from at most nine rows, contiguous in memory. Only rows are indexed: a scene's box is mostly
-// empty, and a row array costs the cells of one face of the box.
-class CellRows {
+// Cubic cells of one size over the points' bounding box: the points sorted by cell (cells in
+// order along x, then y, then z) and, per cell, where its points start. A query reads the cells
+// about it as rows of consecutive cells along x, each a contiguous run of points found by two
+// lookups. Every cell of the box has an entry (4 bytes), so the grid is made only when the box
+// holds few enough cells.
+class CellGrid {
  public:
-  /// None when the rows would need more than `max_rows` entries.
-  static std::optional<CellRows> build(const std::vector<Eigen::Vector3f>& p, float cell, size_t max_rows) {
+  /// None when the box would hold more than `max_cells` cells.
+  static std::optional<CellGrid> build(const std::vector<Eigen::Vector3f>& p, float cell, size_t max_cells) {
     // (Its indices are 32-bit; a point not finite has no cell: the tree answers for such clouds.)
     if (p.empty() || p.size() > std::numeric_limits<uint32_t>::max() || !(cell > 0)) return std::nullopt;
     Eigen::Vector3f lo = p.front(), hi = p.front();
@@ -77,35 +77,28 @@ class CellRows {
       if (!x.allFinite()) return std::nullopt;
       lo = lo.cwiseMin(x), hi = hi.cwiseMax(x);
     }
-    CellRows g;
+    CellGrid g;
     g.cell_ = cell;
     g.lo_ = lo;
-    Eigen::Index along = 0;
-    (hi - lo).maxCoeff(&along);
-    g.axes_ = {static_cast<int>(along), static_cast<int>((along + 1) % 3), static_cast<int>((along + 2) % 3)};
+    double cells = 1;
     for (int a = 0; a < 3; ++a) {
-      const double cells = std::floor((hi[g.axes_[a]] - lo[g.axes_[a]]) / cell) + 1;
-      if (cells > static_cast<double>(std::numeric_limits<int>::max())) return std::nullopt;
-      g.n_[a] = static_cast<int>(cells);
+      const double along = std::floor((hi[a] - lo[a]) / cell) + 1;
+      cells *= along;
+      if (cells > static_cast<double>(std::min<size_t>(max_cells, std::numeric_limits<uint32_t>::max() - 1))) return std::nullopt;
+      g.n_[a] = static_cast<int>(along);
     }
-    if (static_cast<double>(g.n_[1]) * g.n_[2] > static_cast<double>(max_rows)) return std::nullopt;
-    std::vector<std::pair<uint64_t, uint32_t>> keyed(p.size());  // (row, cell along it), point
-    for (size_t i = 0; i < p.size(); ++i) {
-      const auto c = g.cell_of(p[i]);
-      keyed[i] = {(static_cast<uint64_t>(g.row(c[1], c[2])) << 32) | static_cast<uint32_t>(c[0]), static_cast<uint32_t>(i)};
-    }
+    std::vector<std::pair<uint32_t, uint32_t>> keyed(p.size());  // cell, point
+    for (size_t i = 0; i < p.size(); ++i) keyed[i] = {static_cast<uint32_t>(g.cell_index(p[i])), static_cast<uint32_t>(i)};
     std::sort(keyed.begin(), keyed.end());
-    g.row_start_.assign(static_cast<size_t>(g.n_[1]) * static_cast<size_t>(g.n_[2]) + 1, 0);
+    g.start_.assign(static_cast<size_t>(cells) + 1, 0);
     g.points_.resize(p.size());
     g.index_.resize(p.size());
-    g.along_.resize(p.size());
     for (size_t k = 0; k < keyed.size(); ++k) {
-      ++g.row_start_[(keyed[k].first >> 32) + 1];
+      ++g.start_[keyed[k].first + 1];
       g.points_[k] = p[keyed[k].second];
       g.index_[k] = keyed[k].second;
-      g.along_[k] = static_cast<int>(keyed[k].first & 0xffffffffu);
     }
-    for (size_t r = 1; r < g.row_start_.size(); ++r) g.row_start_[r] += g.row_start_[r - 1];
+    for (size_t c = 1; c < g.start_.size(); ++c) g.start_[c] += g.start_[c - 1];
     return g;
   }
   float cell() const { return cell_; }
@@ -115,7 +108,7 @@ class CellRows {
   void for_each_near(const Eigen::Vector3f& q, float radius, Visit&& visit) const {
     std::array<int, 3> first{}, last{};
     for (int a = 0; a < 3; ++a) {
-      const float x = (q[axes_[a]] - lo_[axes_[a]]) / cell_, r = radius / cell_;
+      const float x = (q[a] - lo_[a]) / cell_, r = radius / cell_;
       const float from = std::floor(x - r), to = std::floor(x + r), end = static_cast<float>(n_[a] - 1);
       if (!(to >= 0 && from <= end)) return;  // beyond the box (or NaN)
       first[a] = from < 0 ? 0 : static_cast<int>(from);
@@ -123,41 +116,36 @@ class CellRows {
     }
     for (int k = first[2]; k <= last[2]; ++k)
       for (int j = first[1]; j <= last[1]; ++j) {
-        const size_t r = row(j, k);
-        const auto begin = along_.begin() + row_start_[r], end = along_.begin() + row_start_[r + 1];
-        const auto from = std::lower_bound(begin, end, first[0]);
-        const auto to = std::upper_bound(from, end, last[0]);
-        for (auto u = static_cast<size_t>(from - along_.begin()); u < static_cast<size_t>(to - along_.begin()); ++u)
+        const size_t row = (static_cast<size_t>(k) * static_cast<size_t>(n_[1]) + static_cast<size_t>(j)) * static_cast<size_t>(n_[0]);
+        for (uint32_t u = start_[row + static_cast<size_t>(first[0])], end = start_[row + static_cast<size_t>(last[0]) + 1]; u < end; ++u)
           visit(index_[u], (points_[u] - q).squaredNorm());
       }
   }
 
  private:
-  std::array<int, 3> cell_of(const Eigen::Vector3f& x) const {
-    std::array<int, 3> c{};
-    for (int a = 0; a < 3; ++a) c[a] = std::min(static_cast<int>((x[axes_[a]] - lo_[axes_[a]]) / cell_), n_[a] - 1);
-    return c;
+  size_t cell_index(const Eigen::Vector3f& x) const {
+    std::array<size_t, 3> c{};
+    for (int a = 0; a < 3; ++a) c[a] = static_cast<size_t>(std::min(static_cast<int>((x[a] - lo_[a]) / cell_), n_[a] - 1));
+    return (c[2] * static_cast<size_t>(n_[1]) + c[1]) * static_cast<size_t>(n_[0]) + c[0];
   }
-  size_t row(int j, int k) const { return static_cast<size_t>(k) * static_cast<size_t>(n_[1]) + static_cast<size_t>(j); }
   float cell_ = 0;
   Eigen::Vector3f lo_;
-  std::array<int, 3> axes_{}, n_{};  ///< the axis rows run along first; cells per axis, in that order
-  std::vector<uint32_t> row_start_;  ///< into the sorted points, per row and one past the last
+  std::array<int, 3> n_{};           ///< cells along x, y, z
+  std::vector<uint32_t> start_;      ///< into the sorted points, per cell and one past the last
   std::vector<Eigen::Vector3f> points_;
-  std::vector<uint32_t> index_;  ///< of each sorted point in the indexed points
-  std::vector<int> along_;       ///< its cell along the row
+  std::vector<uint32_t> index_;      ///< of each sorted point in the indexed points
 };
 }  // namespace
 
 struct KdTree3::Impl {
   Cloud cloud;
   Tree tree;
-  std::optional<CellRows> cells;
+  std::optional<CellGrid> cells;
   Impl(std::vector<Eigen::Vector3f> p, float cell) : cloud{std::move(p)}, tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16)) {
     tree.buildIndex();
-    // The rows may take up to 16 entries per point and a million more (a scene of one view at a
-    // few millimetres takes a fraction of that).
-    if (cell > 0) cells = CellRows::build(cloud.pts, cell, 16 * cloud.pts.size() + (size_t{1} << 20));
+    // The grid may take up to 32 cells per point and four million more (16 MB: a scene of one
+    // view, a metre across, at 6 mm cells takes a fraction of that).
+    if (cell > 0) cells = CellGrid::build(cloud.pts, cell, 32 * cloud.pts.size() + (size_t{1} << 22));
   }
 };
 
@@ -185,7 +173,9 @@ std::optional<std::pair<size_t, float>> KdTree3::nearest_within(const Eigen::Vec
 
 void KdTree3::within(const Eigen::Vector3f& query, float radius, std::vector<size_t>& indices) const {
   indices.clear();
-  if (impl_->cells && radius <= impl_->cells->cell()) {
+  // The grid reads (2 r / cell + 1)^2 rows of cells: up to 4 cells' radius, 2 to 3 times faster
+  // than the tree on a scene's surface.
+  if (impl_->cells && radius <= 4 * impl_->cells->cell()) {
     const float radius_sq = radius * radius;
     impl_->cells->for_each_near(query, radius, [&](uint32_t i, float d_sq) {
       if (d_sq < radius_sq) indices.push_back(i);

@@ -97,9 +97,9 @@ TEST(KdTree3, AnyWithinAgreesWithBruteForce) {
   EXPECT_GT(no, 30u);
 }
 
-// With a grid of cells for small radii: the same points found as by brute force, for radii up
-// to the cell (read from the grid) and beyond it (the tree), queries outside the points' box and
-// NaN queries included.
+// With a grid of cells for small radii: the same points found as by brute force, for radii read
+// from the grid (the nearest up to a cell, every point up to four) and beyond (the tree), queries
+// outside the points' box and NaN queries included.
 TEST(KdTree3, TheGridOfCellsFindsWhatBruteForceFinds) {
   std::mt19937 rng(5);
   // Points on a sphere's surface and a plane below it, as a scene's surface lies.
@@ -118,7 +118,7 @@ TEST(KdTree3, TheGridOfCellsFindsWhatBruteForceFinds) {
   for (int i = 0; i < 1500; ++i) queries.push_back(points[rng() % points.size()] + cell * Eigen::Vector3f(g(rng), g(rng), g(rng)));
   for (const auto& query : queries) {
     const auto truth = brute_nearest(points, query);
-    for (const float radius : {0.5f * cell, cell, 2.5f * cell}) {
+    for (const float radius : {0.5f * cell, cell, 2.5f * cell, 4.0f * cell, 6.0f * cell}) {
       const auto near = tree.nearest_within(query, radius);
       if (truth.second <= radius * radius) {
         ASSERT_TRUE(near.has_value()) << "radius " << radius;
@@ -150,8 +150,8 @@ TEST(KdTree3, TheGridOfCellsFindsWhatBruteForceFinds) {
   EXPECT_EQ(two.nearest_within({0.9f, 0, 0}, 0.25f)->first, 1u);
 }
 
-// Clouds a grid cannot index (points so far apart that small cells would need too many rows; a
-// point not finite): the tree answers.
+// Clouds a grid cannot index (points so far apart that small cells would be too many; a point
+// not finite): the tree answers.
 TEST(KdTree3, CloudsTheGridCannotIndexAreAnsweredByTheTree) {
   const KdTree3 with_nan({{0, 0, 0}, {std::numeric_limits<float>::quiet_NaN(), 0, 0}, {0.5f, 0, 0}}, 0.25f);
   EXPECT_EQ(with_nan.nearest_within({0.4f, 0, 0}, 0.25f)->first, 2u);
