@@ -17,7 +17,7 @@ class KdTree3 {
   /// Indexes a copy of `points`. With `cell_m` > 0, nearest-within queries of a radius up to
   /// `cell_m`, and within queries up to 4 `cell_m`, read a grid of cells that size instead of the
   /// tree (two to four times faster on a scene surface; the same points found), unless the points'
-  /// box holds too many such cells (more than 32 per point and four million).
+  /// box holds too many such cells (more than 64 per point and eight million).
   explicit KdTree3(std::vector<Eigen::Vector3f> points, float cell_m = 0);
   ~KdTree3();
   KdTree3(KdTree3&&) noexcept;
