@@ -84,7 +84,8 @@ class CellGrid {
     for (int a = 0; a < 3; ++a) {
       const double along = std::floor((hi[a] - lo[a]) / cell) + 1;
       cells *= along;
-      if (cells > static_cast<double>(std::min<size_t>(max_cells, std::numeric_limits<uint32_t>::max() - 1))) return std::nullopt;
+      // (Cell indices are ints along each axis and 32-bit in all.)
+      if (cells > static_cast<double>(std::min<size_t>(max_cells, std::numeric_limits<int>::max()))) return std::nullopt;
       g.n_[a] = static_cast<int>(along);
     }
     std::vector<std::pair<uint32_t, uint32_t>> keyed(p.size());  // cell, point

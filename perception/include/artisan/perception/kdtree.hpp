@@ -16,7 +16,7 @@ class KdTree3 {
  public:
   /// Indexes a copy of `points`. With `cell_m` > 0, nearest-within queries of a radius up to
   /// `cell_m`, and within queries up to 4 `cell_m`, read a grid of cells that size instead of the
-  /// tree (two to four times faster on a scene surface; the same points found), unless the points'
+  /// tree (two to three times faster on a scene surface; the same points found), unless the points'
   /// box holds too many such cells (more than 64 per point and eight million).
   explicit KdTree3(std::vector<Eigen::Vector3f> points, float cell_m = 0);
   ~KdTree3();
