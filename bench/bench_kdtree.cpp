@@ -1,21 +1,20 @@
 // The scene's nearest-point queries: KdTree3 with its grid of cells (as recognition builds it for
 // a scene, cells of 2 resolutions) against the same points' k-d tree alone, on a synthetic scene
-// like the clutter bench's (a table top 1.0 by 0.6 m and 25 cylinders of 2-5 cm radius, one point
-// per 3 mm cube) with queries as an ICP makes them: batches of 750 about a spot of the scene (70%
+// like the clutter bench's (a table top 1.0 by 0.6 m and 25 cylinders of 2-5 cm radius, resampled
+// to one point per 3 mm cube as the recognizer resamples) with queries as an ICP makes them: batches of 750 about a spot of the scene (70%
 // near its surface, 30% off it), each batch asked 15 times. Both must find the same points.
 // Output: JSON on stdout.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdint>
 #include <iostream>
 #include <random>
-#include <unordered_set>
 
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
 #include "artisan/perception/kdtree.hpp"
+#include "artisan/perception/spin_image.hpp"
 
 using namespace artisan;
 
@@ -26,25 +25,22 @@ constexpr float kResolution = 0.003f;
 std::vector<Eigen::Vector3f> table_scene(std::mt19937& rng) {
   std::uniform_real_distribution<float> u(0, 1);
   std::normal_distribution<float> g(0, 1);
-  std::vector<Eigen::Vector3f> dense;
+  PointCloud dense;
   for (float x = 0; x < 1.0f; x += 0.001f)
-    for (float y = 0; y < 0.6f; y += 0.001f) dense.emplace_back(x, y, 0.0f);
+    for (float y = 0; y < 0.6f; y += 0.001f) dense.points.emplace_back(x, y, 0.0f), dense.normals.emplace_back(0.0f, 0.0f, 1.0f);
   for (int c = 0; c < 25; ++c) {
     const Eigen::Vector3f origin(0.05f + 0.9f * u(rng), 0.05f + 0.5f * u(rng), 0.05f);
     const Eigen::Vector3f axis = Eigen::Vector3f(g(rng), g(rng), g(rng)).normalized();
     const Eigen::Vector3f a = axis.unitOrthogonal(), b = axis.cross(a);
     const float radius = 0.02f + 0.03f * u(rng), length = 0.1f + 0.2f * u(rng);
     for (float s = 0; s < length; s += 0.001f)
-      for (float t = 0; t < 6.2832f; t += 0.001f / radius) dense.push_back(origin + s * axis + radius * (std::cos(t) * a + std::sin(t) * b));
+      for (float t = 0; t < 6.2832f; t += 0.001f / radius) {
+        const Eigen::Vector3f out = std::cos(t) * a + std::sin(t) * b;
+        dense.points.push_back(origin + s * axis + radius * out);
+        dense.normals.push_back(out);
+      }
   }
-  // One point per cube of the resolution, as the recognizer resamples a scene.
-  std::unordered_set<int64_t> taken;
-  std::vector<Eigen::Vector3f> points;
-  for (const auto& p : dense) {
-    const Eigen::Vector3i c = (p / kResolution).array().floor().cast<int>();
-    if (taken.insert((int64_t{c.x()} + 1000) << 40 | (int64_t{c.y()} + 1000) << 20 | (int64_t{c.z()} + 1000)).second) points.push_back(p);
-  }
-  return points;
+  return resample_oriented_points(dense, kResolution).points;
 }
 
 std::vector<Eigen::Vector3f> icp_queries(const std::vector<Eigen::Vector3f>& points, std::mt19937& rng) {

@@ -755,7 +755,7 @@ TEST(Recognition, ARivalThatFitsBetterTakesTheWinnersPlace) {
 // was accepted never tried it again. A rival that passes and loses now stays open
 // (RecognitionParams::losing_rivals_stay_open). Method: bench_recognition's scene 33
 // (data/recognition/clutter-scene33: two tees, two valves, a pipe and a flange with distractors),
-// whose tee#2 (53% occluded) lies about 18 cm from tee#1 (45% occluded), recognized with the
+// whose tee#2 (53% occluded) lies about 19 cm from tee#1 (45% occluded), recognized with the
 // five-part library as the bench does, with the rivals closed and with the default. Closed,
 // tee#2 must be missed (the test fails if it is found, as the scene would no longer test the
 // change); open, both tees must be found at their poses (MSSD within 10% of the diameter), and
