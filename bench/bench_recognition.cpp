@@ -303,6 +303,7 @@ int main(int argc, char** argv) {
       else if (k == "rivals") tuned.rivals = int(v);
       else if (k == "losing_rivals_stay_open") tuned.losing_rivals_stay_open = v != 0;
       else if (k == "rival_margin") tuned.rival_margin = v;
+      else if (k == "conflict_margin") tuned.conflict_margin = v;
       else if (k == "rival_coarse_slack") tuned.rival_coarse_slack = v;
       else if (k == "min_correlation") tuned.min_correlation = v;
       else if (k == "max_matches_grouped") tuned.max_matches_grouped = size_t(v);

@@ -1591,6 +1591,27 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     for (auto& s : searches)
       if (s.winner && s.instances < params.max_instances && (!next || s.gain.size() > next->gain.size())) next = &s;
     if (!next) break;
+    // Another model's winner that this one's acceptance would refuse and whose acceptance would
+    // refuse this one is the other reading of the same object: the one the evidence is less
+    // against is accepted.
+    if (params.conflict_margin >= 0) {
+      const auto against = [](const Search& s) {
+        const auto& seen = *s.verified[*s.winner].seen;
+        return seen.free_space + (1 - seen.explained);
+      };
+      std::vector<char> gained(scene_points.points.size(), 0);
+      for (const size_t p : next->gain) gained[p] = 1;
+      Search* better = next;
+      for (auto& other : searches) {
+        if (&other == next || !other.winner || other.instances >= params.max_instances) continue;
+        const auto shared = static_cast<double>(std::count_if(other.gain.begin(), other.gain.end(), [&](size_t p) { return gained[p] != 0; }));
+        if (shared <= params.max_shared_support * static_cast<double>(other.gain.size()) ||
+            shared <= params.max_shared_support * static_cast<double>(next->gain.size()))
+          continue;
+        if (against(other) + params.conflict_margin < against(*better)) better = &other;
+      }
+      next = better;
+    }
     // Accept it.
     record(*next, true);
     auto& verified = next->verified;

@@ -165,6 +165,7 @@ std::vector<RecognizedObject> recognize_models(Workspace& ws, ObjectId scene_id,
                            {"losing_rivals_stay_open", params.losing_rivals_stay_open},
                            {"rival_margin", params.rival_margin},
                            {"max_shared_support", params.max_shared_support},
+                           {"conflict_margin", params.conflict_margin},
                            {"ambiguity_margin", params.ambiguity_margin}};
   std::vector<RecognizedObject> out;
   ws.write([&] {

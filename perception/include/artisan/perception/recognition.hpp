@@ -207,6 +207,13 @@ struct RecognitionParams {
   /// refused: the same instance again, or another model fitted to part of it (instances are
   /// accepted in the order of how much scene surface they explain, across models)
   double max_shared_support = 0.3;
+  /// [1] two models' instances that would each refuse the other (the scene surface both newly
+  /// explain is more than max_shared_support of what each does: a pipe along a tee's run) are
+  /// one object: of the two, the one the sensors' evidence is less against (its share in seen
+  /// free space plus the share of what they should have seen of it that they did not) by more
+  /// than this margin is accepted, not the one that explains more surface (negative: by the
+  /// surface alone)
+  double conflict_margin = 0.1;
   /// [1] a different pose at the same place (RecognizedInstance::ambiguous) that puts at least
   /// 1 - ambiguity_margin of the found one's share of the model on the scene, and passes the
   /// tests, is an ambiguity; so is another model's pose that passes the tests and explains at
