@@ -1580,6 +1580,15 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
           s.hypotheses.push_back(std::move(h));
   }
   result.seconds_hypotheses = since(t0);
+  // The scene points a search's winner newly explains, flagged; and how many of another's are among them.
+  const auto gain_flags = [&](const Search& s) {
+    std::vector<char> flags(scene_points.points.size(), 0);
+    for (const size_t p : s.gain) flags[p] = 1;
+    return flags;
+  };
+  const auto shared_gain = [](const std::vector<char>& flags, const Search& other) {
+    return static_cast<size_t>(std::count_if(other.gain.begin(), other.gain.end(), [&](size_t p) { return flags[p] != 0; }));
+  };
   while (true) {
     for (auto& s : searches)
       if (s.stale && s.instances < params.max_instances) {
@@ -1599,12 +1608,11 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         const auto& seen = *s.verified[*s.winner].seen;
         return seen.free_space + (1 - seen.explained);
       };
-      std::vector<char> gained(scene_points.points.size(), 0);
-      for (const size_t p : next->gain) gained[p] = 1;
+      const auto gained = gain_flags(*next);
       Search* better = next;
       for (auto& other : searches) {
         if (&other == next || !other.winner || other.instances >= params.max_instances) continue;
-        const auto shared = static_cast<double>(std::count_if(other.gain.begin(), other.gain.end(), [&](size_t p) { return gained[p] != 0; }));
+        const auto shared = static_cast<double>(shared_gain(gained, other));
         if (shared <= params.max_shared_support * static_cast<double>(other.gain.size()) ||
             shared <= params.max_shared_support * static_cast<double>(next->gain.size()))
           continue;
@@ -1640,12 +1648,11 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // that explains most of it. A tee whose branch is hidden and a pipe on its run are told apart
     // by nothing the sensor saw.
     {
-      std::vector<char> gained(scene_points.points.size(), 0);
-      for (const size_t p : next->gain) gained[p] = 1;
+      const auto gained = gain_flags(*next);
       size_t most = 0;
       for (const auto& other : searches) {
         if (&other == next || !other.winner) continue;
-        const auto shared = static_cast<size_t>(std::count_if(other.gain.begin(), other.gain.end(), [&](size_t p) { return gained[p] != 0; }));
+        const size_t shared = shared_gain(gained, other);
         if (shared <= most || static_cast<double>(shared) < (1 - params.ambiguity_margin) * static_cast<double>(next->gain.size())) continue;
         most = shared;
         ambiguous_with(other.m, other.verified[*other.winner].T);
