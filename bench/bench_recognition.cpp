@@ -425,6 +425,9 @@ int main(int argc, char** argv) {
   // Detections flagged ambiguous (another pose or model fits about as well): right ones, false
   // ones, and false ones whose alternative (model and pose) is the right one.
   int ambiguous_right = 0, ambiguous_false = 0, ambiguous_alternative_right = 0;
+  // False detections of a model within 10 mm of one of its true instances, not at its pose: the
+  // right part at the right place, turned wrong (a valve flipped about its run, a tee's branch).
+  int false_turned = 0;
   double sim_s = 0;
   json scenes = json::array();
   std::map<std::string, int> diagnosis;  // missed instances by the stage a pose near them reached
@@ -473,6 +476,11 @@ int main(int argc, char** argv) {
       return std::any_of(truth.begin(), truth.end(),
                          [&](const Instance& inst) { return inst.model == model && symmetric_match(*by_name.at(model), inst.T_sensor_object, T); });
     };
+    for (const auto& i : result.instances)
+      if (!at_true_pose(i.model, i.T_scene_model))
+        false_turned += std::any_of(truth.begin(), truth.end(), [&](const Instance& inst) {
+          return inst.model == i.model && (inst.T_sensor_object.translation() - i.T_scene_model.translation()).norm() < 0.01;
+        });
     for (const auto& i : result.instances) {
       if (!i.ambiguous) continue;
       if (at_true_pose(i.model, i.T_scene_model)) ++ambiguous_right;
@@ -488,7 +496,8 @@ int main(int argc, char** argv) {
           return " (ambiguous: " + i.alternative_model + (at_true_pose(i.alternative_model, i.T_scene_model_alternative) ? ", at a true one," : "") +
                  " fits the same surface)";
         const double d = symmetric_distance(*by_name.at(i.model), i.T_scene_model, i.T_scene_model_alternative);
-        return " (ambiguous: the alternative " + std::to_string(int(std::lround(100 * d))) + "% of the diameter away)";
+        return " (ambiguous: the alternative " + std::to_string(int(std::lround(100 * d))) + "% of the diameter away" +
+               (at_true_pose(i.model, i.T_scene_model_alternative) ? ", at a true one" : "") + ")";
       };
       for (const auto& i : result.instances) {
         if (at_true_pose(i.model, i.T_scene_model))
@@ -519,6 +528,12 @@ int main(int argc, char** argv) {
                        T_world_model.linear()(2, 2), lowest);
           const auto c = check_pose(scene, library, i.model_index, i.T_scene_model, params, false);
           std::fprintf(stderr, "    measured again there: planarity %.3f through %.3f\n", c.support_planarity, c.through_fraction);
+          if (i.ambiguous) {
+            const auto a = check_pose(scene, library, i.alternative_model_index, i.T_scene_model_alternative, params, false);
+            std::fprintf(stderr, "    the alternative: overlap %.3f rmse %.2f mm free %.3f explained %.3f occluded %.3f continued %.3f planarity %.3f\n",
+                         a.overlap_fraction, a.rmse_m * 1e3, a.free_space_fraction, a.visible_explained, a.occluded_fraction, a.continued_fraction,
+                         a.support_planarity);
+          }
         }
       }
       if (!dump.empty())  // every pose of that model tried or proposed, and how far from the nearest true instance
@@ -680,6 +695,7 @@ int main(int argc, char** argv) {
   out["artisan_spin_images"] = split_report(ours_all, ours_split);
   out["artisan_spin_images"]["ambiguous_detections"] = {
       {"right", ambiguous_right}, {"false", ambiguous_false}, {"false_with_the_right_alternative", ambiguous_alternative_right}};
+  out["artisan_spin_images"]["false_positives_turned"] = false_turned;
   if (with_ppf) {
     out["opencv_ppf_icp"] = split_report(ppf_all, ppf_split);
     out["opencv_ppf_icp"].update({{"training_seconds", ppf_training_s},
