@@ -476,14 +476,14 @@ int main(int argc, char** argv) {
       return std::any_of(truth.begin(), truth.end(),
                          [&](const Instance& inst) { return inst.model == model && symmetric_match(*by_name.at(model), inst.T_sensor_object, T); });
     };
-    for (const auto& i : result.instances)
-      if (!at_true_pose(i.model, i.T_scene_model))
+    for (const auto& i : result.instances) {
+      const bool right = at_true_pose(i.model, i.T_scene_model);
+      if (!right)
         false_turned += std::any_of(truth.begin(), truth.end(), [&](const Instance& inst) {
           return inst.model == i.model && (inst.T_sensor_object.translation() - i.T_scene_model.translation()).norm() < 0.01;
         });
-    for (const auto& i : result.instances) {
       if (!i.ambiguous) continue;
-      if (at_true_pose(i.model, i.T_scene_model)) ++ambiguous_right;
+      if (right) ++ambiguous_right;
       else ++ambiguous_false, ambiguous_alternative_right += at_true_pose(i.alternative_model, i.T_scene_model_alternative);
     }
     const auto ours_scored = scored(ours_truth);
