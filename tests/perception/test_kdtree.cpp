@@ -150,6 +150,31 @@ TEST(KdTree3, TheGridOfCellsFindsWhatBruteForceFinds) {
   EXPECT_EQ(two.nearest_within({0.9f, 0, 0}, 0.25f)->first, 1u);
 }
 
+// Of points equally near, the grid answers the first it holds (the lowest index among copies of
+// one point in one cell), however the copies fall among the four read at a time, and runs of every
+// length up to and past a multiple of four.
+TEST(KdTree3, TheGridAnswersTheFirstOfEquallyNearPoints) {
+  const float cell = 0.01f;
+  for (size_t run = 1; run <= 13; ++run)
+    for (size_t copy_at = 0; copy_at + 1 < run; ++copy_at) {
+      // `run` points in a row in one cell, the nearest at `copy_at` and copied at the run's end,
+      // and a point in the next cell.
+      std::vector<Eigen::Vector3f> points;
+      for (size_t i = 0; i < run; ++i) points.push_back({0.002f + 0.0005f * static_cast<float>(i), 0.005f, 0.005f});
+      const Eigen::Vector3f nearest = points[copy_at];
+      points.back() = nearest;
+      points.push_back({0.015f, 0.005f, 0.005f});
+      const KdTree3 grid(points, cell);
+      const auto near = grid.nearest_within({nearest.x(), nearest.y(), nearest.z() + 0.001f}, cell);
+      ASSERT_TRUE(near.has_value());
+      EXPECT_EQ(near->first, copy_at) << "run " << run;
+      std::vector<size_t> found;
+      grid.within(nearest, 0.0001f, found);
+      std::sort(found.begin(), found.end());
+      EXPECT_EQ(found, (std::vector<size_t>{copy_at, run - 1})) << "run " << run;
+    }
+}
+
 // Clouds a grid cannot index (points so far apart that small cells would be too many; a point
 // not finite): the tree answers.
 TEST(KdTree3, CloudsTheGridCannotIndexAreAnsweredByTheTree) {
