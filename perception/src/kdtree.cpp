@@ -103,6 +103,17 @@ class CellGrid {
       g.index_[k] = keyed[k].second;
     }
     for (size_t c = 1; c < g.start_.size(); ++c) g.start_[c] += g.start_[c - 1];
+    // Every cell within one cell of a point's (the 27 about it) is marked as near one.
+    g.near_.assign(static_cast<size_t>(cells), false);
+    const size_t row = static_cast<size_t>(g.n_[0]), plane = row * static_cast<size_t>(g.n_[1]);
+    for (size_t c = 0, n = static_cast<size_t>(cells); c < n; ++c) {
+      if (g.start_[c] == g.start_[c + 1]) continue;
+      const int x = static_cast<int>(c % row), y = static_cast<int>(c / row % static_cast<size_t>(g.n_[1])), z = static_cast<int>(c / plane);
+      for (int k = std::max(z - 1, 0); k <= std::min(z + 1, g.n_[2] - 1); ++k)
+        for (int j = std::max(y - 1, 0); j <= std::min(y + 1, g.n_[1] - 1); ++j)
+          for (int i = std::max(x - 1, 0); i <= std::min(x + 1, g.n_[0] - 1); ++i)
+            g.near_[static_cast<size_t>(k) * plane + static_cast<size_t>(j) * row + static_cast<size_t>(i)] = true;
+    }
     return g;
   }
   float cell() const { return cell_; }
@@ -165,6 +176,9 @@ class CellGrid {
   /// about `q` reaches, in cell order.
   template <class Run>
   void for_each_run(const Eigen::Vector3f& q, float radius, Run&& run) const {
+    // A query in the box whose cell has no point within one cell has none within a radius up to a
+    // cell: one bit read (most of an ICP's queries from a pose far off lie in empty space).
+    if (radius <= cell_ && !near(q)) return;
     std::array<int, 3> first{}, last{};
     for (int a = 0; a < 3; ++a) {
       const float x = (q[a] - lo_[a]) / cell_, r = radius / cell_;
@@ -179,6 +193,16 @@ class CellGrid {
         run(start_[row + static_cast<size_t>(first[0])], start_[row + static_cast<size_t>(last[0]) + 1]);
       }
   }
+  /// Whether `q` lies outside the box or in a cell near a point (false for NaN).
+  bool near(const Eigen::Vector3f& q) const {
+    size_t c = 0;
+    for (int a = 2; a >= 0; --a) {
+      const float x = (q[a] - lo_[a]) / cell_;
+      if (!(x >= 0 && x < static_cast<float>(n_[a]))) return x == x;  // outside the box: the rows decide
+      c = c * static_cast<size_t>(n_[a]) + static_cast<size_t>(x);
+    }
+    return near_[c];
+  }
   size_t cell_index(const Eigen::Vector3f& x) const {
     std::array<size_t, 3> c{};
     for (int a = 0; a < 3; ++a) c[a] = static_cast<size_t>(std::min(static_cast<int>((x[a] - lo_[a]) / cell_), n_[a] - 1));
@@ -190,6 +214,7 @@ class CellGrid {
   std::vector<uint32_t> start_;              ///< into the sorted points, per cell and one past the last
   std::array<std::vector<float>, 3> xyz_;    ///< the sorted points' x, y and z
   std::vector<uint32_t> index_;              ///< of each sorted point in the indexed points
+  std::vector<bool> near_;                   ///< per cell, whether a point lies in it or the 26 about it
 };
 }  // namespace
 
