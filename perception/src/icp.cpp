@@ -4,6 +4,7 @@
 #include <string>
 
 #include <Eigen/Cholesky>
+#include <omp.h>
 
 #include "artisan/core/error.hpp"
 
@@ -43,44 +44,51 @@ IcpResult icp_point_to_plane(const PointCloud& source, const PointCloud& target,
   for (int it = 0; it < settings.max_iterations; ++it) {
     const Eigen::Matrix3f R = T.linear().cast<float>();
     const Eigen::Vector3f t = T.translation().cast<float>();
-    Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Zero();
-    Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
-    double sq_sum = 0;
-    size_t inliers = 0;
+    // The normal equations, summed over the samples that have a partner.
+    struct Sums {
+      Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Zero();
+      Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
+      double sq_sum = 0;
+      size_t inliers = 0;
+      void add(const Sums& o) { H += o.H, g += o.g, sq_sum += o.sq_sum, inliers += o.inliers; }
+    };
+    const auto add_sample = [&](size_t k, Sums& sums) {
+      const size_t i = samples[k];
+      const Eigen::Vector3f p = R * source.points[i] + t;
+      const auto near = target_tree.nearest_within(p, max_d);
+      if (!near) return;
+      const size_t j = near->first;
+      const Eigen::Vector3f& n = target.normals[j];
+      if ((R * source.normals[i]).dot(n) < min_cos) return;
+      // Residual along the target normal; linearised rotation: (p x n) . w + n . dt.
+      const double r = static_cast<double>((p - target.points[j]).dot(n));
+      Eigen::Matrix<double, 6, 1> J;
+      J << p.cross(n).cast<double>(), n.cast<double>();
+      const double abs_r = std::abs(r);
+      const double w = abs_r <= settings.huber_delta_m ? 1.0 : settings.huber_delta_m / abs_r;  // Huber weight
+      sums.H += w * J * J.transpose();
+      sums.g += w * r * J;
+      sums.sq_sum += r * r;
+      ++sums.inliers;
+    };
+    Sums sums;
+    if (omp_in_parallel()) {
+      // Called from a thread of a parallel region (one ICP per thread): a nested region would run
+      // on this thread alone and cost more to open than a coarse ICP's iteration takes.
+      Sums one;
+      for (size_t k = 0; k < samples.size(); ++k) add_sample(k, one);
+      sums.add(one);
+    } else {
 #pragma omp parallel
-    {
-      Eigen::Matrix<double, 6, 6> H_local = Eigen::Matrix<double, 6, 6>::Zero();
-      Eigen::Matrix<double, 6, 1> g_local = Eigen::Matrix<double, 6, 1>::Zero();
-      double sq_local = 0;
-      size_t in_local = 0;
-#pragma omp for nowait
-      for (size_t k = 0; k < samples.size(); ++k) {
-        const size_t i = samples[k];
-        const Eigen::Vector3f p = R * source.points[i] + t;
-        const auto near = target_tree.nearest_within(p, max_d);
-        if (!near) continue;
-        const size_t j = near->first;
-        const Eigen::Vector3f& n = target.normals[j];
-        if ((R * source.normals[i]).dot(n) < min_cos) continue;
-        // Residual along the target normal; linearised rotation: (p x n) . w + n . dt.
-        const double r = static_cast<double>((p - target.points[j]).dot(n));
-        Eigen::Matrix<double, 6, 1> J;
-        J << p.cross(n).cast<double>(), n.cast<double>();
-        const double abs_r = std::abs(r);
-        const double w = abs_r <= settings.huber_delta_m ? 1.0 : settings.huber_delta_m / abs_r;  // Huber weight
-        H_local += w * J * J.transpose();
-        g_local += w * r * J;
-        sq_local += r * r;
-        ++in_local;
-      }
-#pragma omp critical
       {
-        H += H_local;
-        g += g_local;
-        sq_sum += sq_local;
-        inliers += in_local;
+        Sums local;
+#pragma omp for nowait
+        for (size_t k = 0; k < samples.size(); ++k) add_sample(k, local);
+#pragma omp critical
+        sums.add(local);
       }
     }
+    const auto& [H, g, sq_sum, inliers] = sums;
     result.iterations = it + 1;
     result.inliers = inliers;
     result.rmse_m = inliers ? std::sqrt(sq_sum / inliers) : 0.0;
