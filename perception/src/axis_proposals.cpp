@@ -155,10 +155,10 @@ std::vector<SceneAxis> scene_axes(const PointCloud& scene, const KdTree3& scene_
   };
   std::vector<Local> local(n);
   const auto skipped = [&](size_t i) { return !ignore.empty() && ignore[i]; };
-#pragma omp parallel for schedule(dynamic, 256)
+  std::vector<size_t> near;
+#pragma omp parallel for schedule(dynamic, 256) private(near)
   for (size_t i = 0; i < n; ++i) {
     if (skipped(i)) continue;
-    std::vector<size_t> near;
     scene_tree.within(scene.points[i], reach, near);
     std::erase_if(near, skipped);
     if (near.size() < 10) continue;

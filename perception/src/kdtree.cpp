@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -33,6 +34,13 @@ std::optional<std::pair<size_t, float>> nearest_below(const Tree& tree, const Ei
   tree.findNeighbors(result, query.data(), nanoflann::SearchParams(32, 0.0f, false));
   if (result.size() == 0) return std::nullopt;
   return std::pair{index, dist_sq};
+}
+
+// The next float above `x` (std::nextafter towards infinity; for a positive finite one without the
+// library call, which cost as much as a query's bookkeeping).
+float next_above(float x) {
+  if (x > 0 && x < std::numeric_limits<float>::max()) return std::bit_cast<float>(std::bit_cast<uint32_t>(x) + 1);
+  return std::nextafter(x, std::numeric_limits<float>::infinity());
 }
 
 // nanoflann's radius result set, collecting the indices alone into the caller's vector (its own
@@ -153,6 +161,21 @@ class CellGrid {
     return std::pair<size_t, float>{index_[at], best};
   }
 
+  /// Whether a point within `radius` of `q` passes `test` (asked in cell order, up to the first
+  /// that passes). The distance is summed as nanoflann sums it, (x^2 + y^2) + z^2, so that the
+  /// answer is the tree's.
+  bool any_within(const Eigen::Vector3f& q, float radius, const std::function<bool(size_t)>& test) const {
+    const float radius_sq = radius * radius;
+    bool found = false;
+    for_each_run(q, radius, [&](uint32_t u, uint32_t end) {
+      for (; u < end && !found; ++u) {
+        const float dx = xyz_[0][u] - q.x(), dy = xyz_[1][u] - q.y(), dz = xyz_[2][u] - q.z();
+        found = (dx * dx + dy * dy) + dz * dz < radius_sq && test(index_[u]);
+      }
+    });
+    return found;
+  }
+
   /// Calls `visit(index)` for every point within `radius` of `q`, in cell order.
   template <class Visit>
   void for_each_within(const Eigen::Vector3f& q, float radius, Visit&& visit) const {
@@ -242,7 +265,7 @@ std::pair<size_t, float> KdTree3::nearest(const Eigen::Vector3f& query) const {
 
 std::optional<std::pair<size_t, float>> KdTree3::nearest_within(const Eigen::Vector3f& query, float radius) const {
   // A point exactly at the radius is taken.
-  const float worst_sq = std::nextafter(radius * radius, std::numeric_limits<float>::infinity());
+  const float worst_sq = next_above(radius * radius);
   if (!impl_->cells || !(radius <= impl_->cells->cell())) return nearest_below(impl_->tree, query, worst_sq);
   return impl_->cells->nearest(query, radius, worst_sq);
 }
@@ -260,6 +283,8 @@ void KdTree3::within(const Eigen::Vector3f& query, float radius, std::vector<siz
 }
 
 bool KdTree3::any_within(const Eigen::Vector3f& query, float radius, const std::function<bool(size_t)>& test) const {
+  // The grid up to 8 cells' radius (a spin image's flat-neighbourhood test, 4.2 cells).
+  if (impl_->cells && radius <= 8 * impl_->cells->cell()) return impl_->cells->any_within(query, radius, test);
   FirstPassing first{radius * radius, test};
   impl_->tree.findNeighbors(first, query.data(), nanoflann::SearchParams(32, 0.0f, false));
   return first.found;

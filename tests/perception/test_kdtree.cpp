@@ -98,7 +98,8 @@ TEST(KdTree3, AnyWithinAgreesWithBruteForce) {
 }
 
 // With a grid of cells for small radii: the same points found as by brute force, for radii read
-// from the grid (the nearest up to a cell, every point up to four) and beyond (the tree), queries
+// from the grid (the nearest up to a cell, every point up to four, any passing a test up to eight)
+// and beyond (the tree), queries
 // outside the points' box and NaN queries included.
 TEST(KdTree3, TheGridOfCellsFindsWhatBruteForceFinds) {
   std::mt19937 rng(5);
@@ -135,6 +136,9 @@ TEST(KdTree3, TheGridOfCellsFindsWhatBruteForceFinds) {
       for (size_t i = 0; i < points.size(); ++i)
         if ((points[i] - query).squaredNorm() < radius * radius) all.push_back(i);
       EXPECT_EQ(found, all) << "radius " << radius;
+      // any_within (the grid up to 8 cells): whether one of them lies above the query.
+      const auto above = [&](size_t i) { return points[i].z() > query.z(); };
+      EXPECT_EQ(tree.any_within(query, radius, above), std::any_of(all.begin(), all.end(), above)) << "radius " << radius;
     }
   }
   EXPECT_GT(hits, 1000u);
