@@ -15,9 +15,10 @@ namespace artisan {
 class KdTree3 {
  public:
   /// Indexes a copy of `points`. With `cell_m` > 0, nearest-within queries of a radius up to
-  /// `cell_m`, and within queries up to 4 `cell_m`, read a grid of cells that size instead of the
-  /// tree (two to three times faster on a scene surface; the same points found), unless the points'
-  /// box holds too many such cells (more than 64 per point and eight million).
+  /// `cell_m`, within queries up to 4 `cell_m` and any_within up to 8 read a grid of cells that
+  /// size instead of the tree (two to four times faster on a scene surface; the same points found,
+  /// a query in empty space answered from one bit), unless the points' box holds too many such
+  /// cells (more than 64 per point and eight million).
   explicit KdTree3(std::vector<Eigen::Vector3f> points, float cell_m = 0);
   ~KdTree3();
   KdTree3(KdTree3&&) noexcept;
