@@ -114,13 +114,14 @@ class CellGrid {
     // Every cell within one cell of a point's (the 27 about it) is marked as near one.
     g.near_.assign(static_cast<size_t>(cells), false);
     const size_t row = static_cast<size_t>(g.n_[0]), plane = row * static_cast<size_t>(g.n_[1]);
-    for (size_t c = 0, n = static_cast<size_t>(cells); c < n; ++c) {
-      if (g.start_[c] == g.start_[c + 1]) continue;
+    for (size_t k = 0; k < keyed.size(); ++k) {
+      const size_t c = keyed[k].first;
+      if (k > 0 && keyed[k - 1].first == c) continue;  // (sorted: a cell's points are together)
       const int x = static_cast<int>(c % row), y = static_cast<int>(c / row % static_cast<size_t>(g.n_[1])), z = static_cast<int>(c / plane);
-      for (int k = std::max(z - 1, 0); k <= std::min(z + 1, g.n_[2] - 1); ++k)
+      for (int k2 = std::max(z - 1, 0); k2 <= std::min(z + 1, g.n_[2] - 1); ++k2)
         for (int j = std::max(y - 1, 0); j <= std::min(y + 1, g.n_[1] - 1); ++j)
           for (int i = std::max(x - 1, 0); i <= std::min(x + 1, g.n_[0] - 1); ++i)
-            g.near_[static_cast<size_t>(k) * plane + static_cast<size_t>(j) * row + static_cast<size_t>(i)] = true;
+            g.near_[static_cast<size_t>(k2) * plane + static_cast<size_t>(j) * row + static_cast<size_t>(i)] = true;
     }
     return g;
   }
