@@ -132,18 +132,14 @@ class CellGrid {
   std::optional<std::pair<size_t, float>> nearest(const Eigen::Vector3f& q, float radius, float worst_sq) const {
     // Four lanes each keep their nearest so far and where it is in the sorted points (the first
     // of equals: a lane's positions only grow); the rest of a run is read one point at a time.
-    const __m128 qx = _mm_set1_ps(q.x()), qy = _mm_set1_ps(q.y()), qz = _mm_set1_ps(q.z());
+    const Query4 four(q);
     __m128 lane_best = _mm_set1_ps(worst_sq);
     __m128i lane_at = _mm_set1_epi32(-1);
-    const float *xs = xyz_[0].data(), *ys = xyz_[1].data(), *zs = xyz_[2].data();
     for_each_run(q, radius, [&](uint32_t u, uint32_t end) {
       const __m128i last = _mm_set1_epi32(static_cast<int>(end) - 1);
       for (; u < end; u += 4) {
         // (Lanes past the run's end read the next points, or the padding, and are masked off.)
-        const __m128 dx = _mm_sub_ps(_mm_loadu_ps(xs + u), qx), dy = _mm_sub_ps(_mm_loadu_ps(ys + u), qy);
-        const __m128 dz = _mm_sub_ps(_mm_loadu_ps(zs + u), qz);
-        // (Summed as Eigen's squaredNorm() sums a Vector3f, x^2 + (y^2 + z^2): the same distances.)
-        const __m128 d_sq = _mm_add_ps(_mm_mul_ps(dx, dx), _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
+        const __m128 d_sq = squared_distances(four, u);
         const __m128i here = _mm_add_epi32(_mm_set1_epi32(static_cast<int>(u)), _mm_set_epi32(3, 2, 1, 0));
         const __m128i nearer = _mm_andnot_si128(_mm_cmpgt_epi32(here, last), _mm_castps_si128(_mm_cmplt_ps(d_sq, lane_best)));
         lane_best = _mm_or_ps(_mm_and_ps(_mm_castsi128_ps(nearer), d_sq), _mm_andnot_ps(_mm_castsi128_ps(nearer), lane_best));
@@ -180,15 +176,12 @@ class CellGrid {
   /// Calls `visit(index)` for every point within `radius` of `q`, in cell order.
   template <class Visit>
   void for_each_within(const Eigen::Vector3f& q, float radius, Visit&& visit) const {
-    const __m128 qx = _mm_set1_ps(q.x()), qy = _mm_set1_ps(q.y()), qz = _mm_set1_ps(q.z()), radius_sq = _mm_set1_ps(radius * radius);
-    const float *xs = xyz_[0].data(), *ys = xyz_[1].data(), *zs = xyz_[2].data();
+    const Query4 four(q);
+    const __m128 radius_sq = _mm_set1_ps(radius * radius);
     for_each_run(q, radius, [&](uint32_t u, uint32_t end) {
       for (; u < end; u += 4) {
-        const __m128 dx = _mm_sub_ps(_mm_loadu_ps(xs + u), qx), dy = _mm_sub_ps(_mm_loadu_ps(ys + u), qy);
-        const __m128 dz = _mm_sub_ps(_mm_loadu_ps(zs + u), qz);
-        const __m128 d_sq = _mm_add_ps(_mm_mul_ps(dx, dx), _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
         // (Lanes past the run's end are dropped.)
-        auto inside = static_cast<unsigned>(_mm_movemask_ps(_mm_cmplt_ps(d_sq, radius_sq))) & (end - u >= 4 ? 15u : (1u << (end - u)) - 1);
+        auto inside = static_cast<unsigned>(_mm_movemask_ps(_mm_cmplt_ps(squared_distances(four, u), radius_sq))) & (end - u >= 4 ? 15u : (1u << (end - u)) - 1);
         for (; inside; inside &= inside - 1) visit(index_[u + static_cast<uint32_t>(__builtin_ctz(inside))]);
       }
     });
@@ -196,6 +189,17 @@ class CellGrid {
 
  private:
   static constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
+  struct Query4 {  ///< a query's coordinates, each in four lanes
+    __m128 x, y, z;
+    explicit Query4(const Eigen::Vector3f& q) : x(_mm_set1_ps(q.x())), y(_mm_set1_ps(q.y())), z(_mm_set1_ps(q.z())) {}
+  };
+  /// The squared distances from the query to the sorted points u to u + 3, summed as Eigen's
+  /// squaredNorm() sums a Vector3f, x^2 + (y^2 + z^2): the same distances to the bit.
+  __m128 squared_distances(const Query4& q, uint32_t u) const {
+    const __m128 dx = _mm_sub_ps(_mm_loadu_ps(xyz_[0].data() + u), q.x), dy = _mm_sub_ps(_mm_loadu_ps(xyz_[1].data() + u), q.y);
+    const __m128 dz = _mm_sub_ps(_mm_loadu_ps(xyz_[2].data() + u), q.z);
+    return _mm_add_ps(_mm_mul_ps(dx, dx), _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
+  }
   /// Calls `run(first, end)` with the sorted points of each row of cells that a ball of `radius`
   /// about `q` reaches, in cell order.
   template <class Run>
