@@ -75,9 +75,7 @@ IcpResult icp_point_to_plane(const PointCloud& source, const PointCloud& target,
     if (omp_in_parallel()) {
       // Called from a thread of a parallel region (one ICP per thread): a nested region would run
       // on this thread alone and cost more to open than a coarse ICP's iteration takes.
-      Sums one;
-      for (size_t k = 0; k < samples.size(); ++k) add_sample(k, one);
-      sums.add(one);
+      for (size_t k = 0; k < samples.size(); ++k) add_sample(k, sums);
     } else {
 #pragma omp parallel
       {
