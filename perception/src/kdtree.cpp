@@ -5,9 +5,12 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 
+#if defined(__SSE2__)
 #include <emmintrin.h>
+#endif
 
 #include <nanoflann.hpp>
 
@@ -131,29 +134,27 @@ class CellGrid {
   /// it reaches, or none; of points equally near, the first in cell order.
   std::optional<std::pair<size_t, float>> nearest(const Eigen::Vector3f& q, float radius, float worst_sq) const {
     // Four lanes each keep their nearest so far and where it is in the sorted points (the first
-    // of equals: a lane's positions only grow); the rest of a run is read one point at a time.
+    // of equals: a lane's positions only grow).
     const Query4 four(q);
-    __m128 lane_best = _mm_set1_ps(worst_sq);
-    __m128i lane_at = _mm_set1_epi32(-1);
+    Float4 lane_best = Float4{} + worst_sq;
+    Int4 lane_at = Int4{} - 1;
     for_each_run(q, radius, [&](uint32_t u, uint32_t end) {
-      const __m128i last = _mm_set1_epi32(static_cast<int>(end) - 1);
+      const Int4 last = Int4{} + (static_cast<int>(end) - 1);
       for (; u < end; u += 4) {
         // (Lanes past the run's end read the next points, or the padding, and are masked off.)
-        const __m128 d_sq = squared_distances(four, u);
-        const __m128i here = _mm_add_epi32(_mm_set1_epi32(static_cast<int>(u)), _mm_set_epi32(3, 2, 1, 0));
-        const __m128i nearer = _mm_andnot_si128(_mm_cmpgt_epi32(here, last), _mm_castps_si128(_mm_cmplt_ps(d_sq, lane_best)));
-        lane_best = _mm_or_ps(_mm_and_ps(_mm_castsi128_ps(nearer), d_sq), _mm_andnot_ps(_mm_castsi128_ps(nearer), lane_best));
-        lane_at = _mm_or_si128(_mm_and_si128(nearer, here), _mm_andnot_si128(nearer, lane_at));
+        const Float4 d_sq = squared_distances(four, u);
+        const Int4 here = Int4{0, 1, 2, 3} + static_cast<int>(u);
+        const Int4 nearer = (d_sq < lane_best) & (here <= last);
+        lane_best = std::bit_cast<Float4>((std::bit_cast<Int4>(d_sq) & nearer) | (std::bit_cast<Int4>(lane_best) & ~nearer));
+        lane_at = (here & nearer) | (lane_at & ~nearer);
       }
     });
-    alignas(16) float lane_d[4];
-    alignas(16) uint32_t lane_u[4];
-    _mm_store_ps(lane_d, lane_best);
-    _mm_store_si128(reinterpret_cast<__m128i*>(lane_u), lane_at);
     float best = worst_sq;
     uint32_t at = kNone;
-    for (int l = 0; l < 4; ++l)
-      if (lane_u[l] != kNone && (lane_d[l] < best || (lane_d[l] == best && lane_u[l] < at))) best = lane_d[l], at = lane_u[l];
+    for (int l = 0; l < 4; ++l) {
+      const auto lane_u = static_cast<uint32_t>(lane_at[l]);
+      if (lane_u != kNone && (lane_best[l] < best || (lane_best[l] == best && lane_u < at))) best = lane_best[l], at = lane_u;
+    }
     if (at == kNone) return std::nullopt;
     return std::pair<size_t, float>{index_[at], best};
   }
@@ -177,28 +178,44 @@ class CellGrid {
   template <class Visit>
   void for_each_within(const Eigen::Vector3f& q, float radius, Visit&& visit) const {
     const Query4 four(q);
-    const __m128 radius_sq = _mm_set1_ps(radius * radius);
+    const Float4 radius_sq = Float4{} + radius * radius;
     for_each_run(q, radius, [&](uint32_t u, uint32_t end) {
       for (; u < end; u += 4) {
+        const Int4 inside = squared_distances(four, u) < radius_sq;
         // (Lanes past the run's end are dropped.)
-        auto inside = static_cast<unsigned>(_mm_movemask_ps(_mm_cmplt_ps(squared_distances(four, u), radius_sq))) & (end - u >= 4 ? 15u : (1u << (end - u)) - 1);
-        for (; inside; inside &= inside - 1) visit(index_[u + static_cast<uint32_t>(__builtin_ctz(inside))]);
+        auto lanes = lane_bits(inside) & (end - u >= 4 ? 15u : (1u << (end - u)) - 1);
+        for (; lanes; lanes &= lanes - 1) visit(index_[u + static_cast<uint32_t>(__builtin_ctz(lanes))]);
       }
     });
   }
 
  private:
   static constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
+  // Four lanes (GCC's vector extension: SSE2 on x86-64, NEON on ARM).
+  using Float4 = float __attribute__((vector_size(16)));
+  using Int4 = int32_t __attribute__((vector_size(16)));
   struct Query4 {  ///< a query's coordinates, each in four lanes
-    __m128 x, y, z;
-    explicit Query4(const Eigen::Vector3f& q) : x(_mm_set1_ps(q.x())), y(_mm_set1_ps(q.y())), z(_mm_set1_ps(q.z())) {}
+    Float4 x, y, z;
+    explicit Query4(const Eigen::Vector3f& q) : x(Float4{} + q.x()), y(Float4{} + q.y()), z(Float4{} + q.z()) {}
   };
+  /// Bit l set when lane l of `m` is (a comparison's) true.
+  static unsigned lane_bits(Int4 m) {
+#if defined(__SSE2__)
+    return static_cast<unsigned>(_mm_movemask_ps(reinterpret_cast<__m128>(m)));
+#else
+    return static_cast<unsigned>((m[0] & 1) | (m[1] & 2) | (m[2] & 4) | (m[3] & 8));
+#endif
+  }
+  static Float4 load4(const float* p) {
+    Float4 v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+  }
   /// The squared distances from the query to the sorted points u to u + 3, summed as Eigen's
   /// squaredNorm() sums a Vector3f, x^2 + (y^2 + z^2): the same distances to the bit.
-  __m128 squared_distances(const Query4& q, uint32_t u) const {
-    const __m128 dx = _mm_sub_ps(_mm_loadu_ps(xyz_[0].data() + u), q.x), dy = _mm_sub_ps(_mm_loadu_ps(xyz_[1].data() + u), q.y);
-    const __m128 dz = _mm_sub_ps(_mm_loadu_ps(xyz_[2].data() + u), q.z);
-    return _mm_add_ps(_mm_mul_ps(dx, dx), _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
+  Float4 squared_distances(const Query4& q, uint32_t u) const {
+    const Float4 dx = load4(xyz_[0].data() + u) - q.x, dy = load4(xyz_[1].data() + u) - q.y, dz = load4(xyz_[2].data() + u) - q.z;
+    return dx * dx + (dy * dy + dz * dz);
   }
   /// Calls `run(first, end)` with the sorted points of each row of cells that a ball of `radius`
   /// about `q` reaches, in cell order.
