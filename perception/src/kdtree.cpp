@@ -221,13 +221,15 @@ class CellGrid {
   /// about `q` reaches, in cell order.
   template <class Run>
   void for_each_run(const Eigen::Vector3f& q, float radius, Run&& run) const {
+    std::array<float, 3> at{};  // q in cells from the box's corner
+    for (int a = 0; a < 3; ++a) at[a] = (q[a] - lo_[a]) / cell_;
     // A query in the box whose cell has no point within one cell has none within a radius up to a
     // cell: one bit read (most of an ICP's queries from a pose far off lie in empty space).
-    if (radius <= cell_ && !near(q)) return;
+    if (radius <= cell_ && in_box(at) && !near_[cell_of(at)]) return;
     std::array<int, 3> first{}, last{};
+    const float r = radius / cell_;
     for (int a = 0; a < 3; ++a) {
-      const float x = (q[a] - lo_[a]) / cell_, r = radius / cell_;
-      const float from = std::floor(x - r), to = std::floor(x + r), end = static_cast<float>(n_[a] - 1);
+      const float from = std::floor(at[a] - r), to = std::floor(at[a] + r), end = static_cast<float>(n_[a] - 1);
       if (!(to >= 0 && from <= end)) return;  // beyond the box (or NaN)
       first[a] = from < 0 ? 0 : static_cast<int>(from);
       last[a] = to > end ? n_[a] - 1 : static_cast<int>(to);
@@ -238,15 +240,15 @@ class CellGrid {
         run(start_[row + static_cast<size_t>(first[0])], start_[row + static_cast<size_t>(last[0]) + 1]);
       }
   }
-  /// Whether `q` lies outside the box or in a cell near a point (false for NaN).
-  bool near(const Eigen::Vector3f& q) const {
-    size_t c = 0;
-    for (int a = 2; a >= 0; --a) {
-      const float x = (q[a] - lo_[a]) / cell_;
-      if (!(x >= 0 && x < static_cast<float>(n_[a]))) return x == x;  // outside the box: the rows decide
-      c = c * static_cast<size_t>(n_[a]) + static_cast<size_t>(x);
-    }
-    return near_[c];
+  /// Whether a place in cells from the box's corner lies in the box (false for NaN).
+  bool in_box(const std::array<float, 3>& at) const {
+    for (int a = 0; a < 3; ++a)
+      if (!(at[a] >= 0 && at[a] < static_cast<float>(n_[a]))) return false;
+    return true;
+  }
+  /// The cell of a place in the box, in cells from its corner.
+  size_t cell_of(const std::array<float, 3>& at) const {
+    return (static_cast<size_t>(at[2]) * static_cast<size_t>(n_[1]) + static_cast<size_t>(at[1])) * static_cast<size_t>(n_[0]) + static_cast<size_t>(at[0]);
   }
   size_t cell_index(const Eigen::Vector3f& x) const {
     std::array<size_t, 3> c{};

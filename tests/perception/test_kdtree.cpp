@@ -99,8 +99,7 @@ TEST(KdTree3, AnyWithinAgreesWithBruteForce) {
 
 // With a grid of cells for small radii: the same points found as by brute force, for radii read
 // from the grid (the nearest up to a cell, every point up to four, any passing a test up to eight)
-// and beyond (the tree), queries
-// outside the points' box and NaN queries included.
+// and beyond (the tree), queries outside the points' box and NaN queries included.
 TEST(KdTree3, TheGridOfCellsFindsWhatBruteForceFinds) {
   std::mt19937 rng(5);
   // Points on a sphere's surface and a plane below it, as a scene's surface lies.
