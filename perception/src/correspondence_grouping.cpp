@@ -90,9 +90,16 @@ GroupingResult group_correspondences(const PointCloud& src, const PointCloud& tg
     for (size_t b = a + 1; b < n; ++b)
       pair[a * n + b] = before[a] != kNew && before[b] != kNew ? measured(a, b) : agreement(src, tgt, candidates[a], candidates[b], gamma, t_gc);
   std::vector<size_t> kept, support(n, 0);
-  for (size_t a = 0; a < n; ++a)
-    for (size_t b = a + 1; b < n; ++b)
-      if (pair[a * n + b] & kConsistent) ++support[a], ++support[b];
+#pragma omp parallel
+  {
+    std::vector<size_t> counted(n, 0);
+#pragma omp for schedule(dynamic, 16) nowait
+    for (size_t a = 0; a < n; ++a)
+      for (size_t b = a + 1; b < n; ++b)
+        if (pair[a * n + b] & kConsistent) ++counted[a], ++counted[b];
+#pragma omp critical
+    for (size_t a = 0; a < n; ++a) support[a] += counted[a];
+  }
   for (size_t a = 0; a < n; ++a)
     if (static_cast<int>(support[a]) + 1 >= params.min_group_size) kept.push_back(a);
   std::stable_sort(kept.begin(), kept.end(), [&](size_t a, size_t b) { return support[a] > support[b]; });

@@ -58,13 +58,18 @@ Plane largest_plane(const PointCloud& cloud, const std::vector<char>& taken, dou
     state ^= state << 13, state ^= state >> 7, state ^= state << 17;
     return state;
   };
+  // The tries drawn in order, counted in parallel, the first of the most held kept.
+  std::vector<Plane> tries;
   for (int it = 0; it < 150; ++it) {
     const size_t s = next() % n;
     if (taken[s]) continue;
-    Plane candidate{.normal = cloud.normals[s], .offset = cloud.normals[s].dot(cloud.points[s]), .distance = static_cast<float>(distance)};
-    for (size_t i = 0; i < n; ++i) candidate.count += !taken[i] && candidate.holds(cloud.points[i], cloud.normals[i]);
-    if (candidate.count > best.count) best = candidate;
+    tries.push_back({.normal = cloud.normals[s], .offset = cloud.normals[s].dot(cloud.points[s]), .distance = static_cast<float>(distance)});
   }
+#pragma omp parallel for schedule(dynamic, 1)
+  for (size_t k = 0; k < tries.size(); ++k)
+    for (size_t i = 0; i < n; ++i) tries[k].count += !taken[i] && tries[k].holds(cloud.points[i], cloud.normals[i]);
+  for (const Plane& candidate : tries)
+    if (candidate.count > best.count) best = candidate;
   return best;
 }
 
@@ -198,9 +203,10 @@ class FreeSpace {
         }
         if (nearest >= -tolerance_ || farthest <= tolerance_) continue;
         size_t front = 0, behind = 0;
-        for (const auto& q : p) {
-          const double d = solid.normal.dot(q) - solid.offset;
-          if (std::abs(d) > tolerance_ && under(solid, q, reach)) ++(d > 0 ? front : behind);
+#pragma omp parallel for schedule(static) reduction(+ : front, behind)
+        for (size_t i = 0; i < p.size(); ++i) {
+          const double d = solid.normal.dot(p[i]) - solid.offset;
+          if (std::abs(d) > tolerance_ && under(solid, p[i], reach)) ++(d > 0 ? front : behind);
         }
         c.through = std::max(c.through, static_cast<double>(std::min(front, behind)) / static_cast<double>(p.size()));
       }
@@ -588,15 +594,17 @@ std::vector<PoseHypothesis> pair_hypotheses(const PointCloud& model, const Point
   if (order.size() > static_cast<size_t>(std::max(params.pair_anchors, 0))) order.resize(static_cast<size_t>(std::max(params.pair_anchors, 0)));
   // The pairs tried, drawn in order (the draws are the hypotheses' order), then made and scored
   // in parallel.
-  std::vector<std::pair<size_t, size_t>> tried;
-  std::vector<size_t> near;
-  for (const size_t a : order) {
-    const Eigen::Vector3f& s_a = scene.points[anchors[a]];
-    anchor_tree.within(s_a, diameter, near);
-    std::erase_if(near, [&](size_t b) { return (anchor_points[b] - s_a).norm() < min_distance; });
-    if (near.empty()) continue;
-    for (int t = 0; t < params.pair_partners; ++t) tried.emplace_back(a, near[rng() % near.size()]);
+  // Each anchor's partners are found in parallel.
+  std::vector<std::vector<size_t>> near(order.size());
+#pragma omp parallel for schedule(dynamic, 8)
+  for (size_t k = 0; k < order.size(); ++k) {
+    const Eigen::Vector3f& s_a = anchor_points[order[k]];
+    anchor_tree.within(s_a, diameter, near[k]);
+    std::erase_if(near[k], [&](size_t b) { return (anchor_points[b] - s_a).norm() < min_distance; });
   }
+  std::vector<std::pair<size_t, size_t>> tried;
+  for (size_t k = 0; k < order.size(); ++k)
+    for (int t = 0; !near[k].empty() && t < params.pair_partners; ++t) tried.emplace_back(order[k], near[k][rng() % near[k].size()]);
   std::vector<std::vector<PoseHypothesis>> of_pair(tried.size());
 #pragma omp parallel for schedule(dynamic, 16)
   for (size_t k = 0; k < tried.size(); ++k) {
