@@ -94,8 +94,7 @@ class CellMeans {
     int count = 0;
   };
   // The cell's place in cells_, a new one appended for a key not seen yet: an open-addressing
-  // table with linear probing (std::unordered_map's node per cell made the lookups half of the
-  // scene's resampling).
+  // table with linear probing (no node allocated per cell, as std::unordered_map does).
   size_t index_of(uint64_t key) {
     if (2 * (cells_.size() + 1) > keys_.size()) grow();
     size_t i = slot(key);
