@@ -277,7 +277,7 @@ struct KdTree3::Impl {
     // The tree and the grid are built side by side. The grid may take up to 64 cells per point and
     // eight million more (4 bytes each: a scene of one view, 40,000 points in a box 1.1 by 0.7 by
     // 1.6 m, takes 6 million cells of 6 mm).
-#pragma omp parallel sections num_threads(2)
+#pragma omp parallel sections
     {
 #pragma omp section
       tree.buildIndex();
