@@ -320,6 +320,7 @@ int main(int argc, char** argv) {
       else if (k == "group_hypotheses") tuned.group_hypotheses = v != 0;
       else if (k == "pair_partners") tuned.pair_partners = int(v);
       else if (k == "pair_anchors") tuned.pair_anchors = int(v);
+      else if (k == "pair_seed") tuned.pair_seed = uint32_t(v);
       else if (k == "pair_distance_tolerance_factor") tuned.pair_distance_tolerance_factor = v;
       else if (k == "pair_angle_tolerance_deg") tuned.pair_angle_tolerance_deg = v;
       else if (k == "pair_min_distance_factor") tuned.pair_min_distance_factor = v;

@@ -589,7 +589,7 @@ std::vector<PoseHypothesis> pair_hypotheses(const PointCloud& model, const Point
 
   std::vector<size_t> order(anchors.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::mt19937 rng(20101);  // fixed: the same scene gives the same hypotheses
+  std::mt19937 rng(params.pair_seed);  // the same scene gives the same hypotheses
   std::shuffle(order.begin(), order.end(), rng);
   if (order.size() > static_cast<size_t>(std::max(params.pair_anchors, 0))) order.resize(static_cast<size_t>(std::max(params.pair_anchors, 0)));
   // The pairs tried, drawn in order (the draws are the hypotheses' order), then made and scored

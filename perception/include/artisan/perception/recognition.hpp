@@ -3,6 +3,7 @@
 // model spin images, compressed by PCA onto the leading eigen-spin-images (Johnson & Hebert,
 // CVPR 1998) and searched in the compressed space; correspondences grouped per model, poses
 // estimated, refined by ICP and verified. Several models and several instances of one model.
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -145,6 +146,10 @@ struct RecognitionParams {
   /// on the scene surface (a cheap verification), and the best distinct ones go on to ICP.
   int pair_partners = 8;               ///< [1] partner scene points tried per anchor scene point (0: no pair hypotheses)
   int pair_anchors = 1500;             ///< [1] anchor scene points tried per model, at most
+  /// Seed of the pseudo-random order of anchors and draw of partners: a scene gives the same
+  /// hypotheses for a seed. Another seed is as good a draw: on the clutter bench it measures how
+  /// far the rate moves by chance (see docs/recognition-clutter-log.md).
+  uint32_t pair_seed = 20101;
   double pair_distance_tolerance_factor = 2.0;  ///< [resolutions] |scene distance - model distance| allowed
   double pair_angle_tolerance_deg = 20.0;       ///< [deg] per point-pair-feature angle
   double pair_min_distance_factor = 5.0;        ///< [resolutions] closer pairs fix no stable pose
