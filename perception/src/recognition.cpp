@@ -22,6 +22,7 @@
 #include "artisan/perception/kdtree.hpp"
 #include "axis_proposals.hpp"
 #include "correspondence_grouping.hpp"
+#include "open_table.hpp"
 #include "point_pair_voting.hpp"
 
 namespace artisan {
@@ -73,38 +74,25 @@ Plane largest_plane(const PointCloud& cloud, const std::vector<char>& taken, dou
   return best;
 }
 
-// The nearest depth seen in each bin of a view's projection (a bin packed into one key): an
-// open-addressing table with linear probing, an infinite depth marking a free slot (a depth seen
-// is finite). The free-space test looks up a dozen bins per model point and check, millions per
-// scene; std::unordered_map's node per entry made them a third of the check's time.
+// The nearest depth seen in each bin of a view's projection (a bin packed into one key). The
+// free-space test looks up a dozen bins per model point and check, millions per scene.
 class BinDepths {
  public:
   /// Empty, with room for `entries` bins.
-  void reset(size_t entries) {
-    size_t capacity = 16;
-    while (capacity < 2 * entries) capacity *= 2;
-    shift_ = 64 - std::countr_zero(capacity);
-    keys_.resize(capacity);
-    depths_.assign(capacity, kFree);
-  }
+  void reset(size_t entries) { table_.reset(entries); }
   /// The bin's depth becomes the smaller of its own and `depth`.
   void keep_min(int64_t key, double depth) {
-    size_t i = slot(key);
-    while (depths_[i] != kFree && keys_[i] != key) i = (i + 1) & (keys_.size() - 1);
-    if (depths_[i] == kFree || depth < depths_[i]) keys_[i] = key, depths_[i] = depth;
+    const auto [kept, inserted] = table_.insert(static_cast<uint64_t>(key), depth);
+    if (!inserted && depth < *kept) *kept = depth;
   }
   /// The bin's depth, infinite when nothing was seen there.
   double at(int64_t key) const {
-    for (size_t i = slot(key);; i = (i + 1) & (keys_.size() - 1))
-      if (depths_[i] == kFree || keys_[i] == key) return depths_[i];
+    const double* depth = table_.find(static_cast<uint64_t>(key));
+    return depth ? *depth : std::numeric_limits<double>::infinity();
   }
 
  private:
-  static constexpr double kFree = std::numeric_limits<double>::infinity();
-  size_t slot(int64_t key) const { return static_cast<size_t>((static_cast<uint64_t>(key) * 0x9e3779b97f4a7c15ull) >> shift_); }
-  int shift_ = 60;
-  std::vector<int64_t> keys_;
-  std::vector<double> depths_;
+  detail::OpenTable<double> table_;
 };
 
 // What each sensor saw of the scene, for the free-space test: per view, the nearest scene depth
@@ -593,18 +581,22 @@ std::vector<PoseHypothesis> pair_hypotheses(const PointCloud& model, const Point
   std::shuffle(order.begin(), order.end(), rng);
   if (order.size() > static_cast<size_t>(std::max(params.pair_anchors, 0))) order.resize(static_cast<size_t>(std::max(params.pair_anchors, 0)));
   // The pairs tried, drawn in order (the draws are the hypotheses' order), then made and scored
-  // in parallel.
-  // Each anchor's partners are found in parallel.
-  std::vector<std::vector<size_t>> near(order.size());
-#pragma omp parallel for schedule(dynamic, 8)
-  for (size_t k = 0; k < order.size(); ++k) {
-    const Eigen::Vector3f& s_a = anchor_points[order[k]];
-    anchor_tree.within(s_a, diameter, near[k]);
-    std::erase_if(near[k], [&](size_t b) { return (anchor_points[b] - s_a).norm() < min_distance; });
-  }
+  // in parallel. The anchors' partners are found in parallel a block of anchors at a time (the
+  // lists of all 1,500 anchors would hold some 4 million entries), and drawn from in order.
+  constexpr size_t kBlock = 64;
+  std::vector<std::vector<size_t>> near(std::min(order.size(), kBlock));
   std::vector<std::pair<size_t, size_t>> tried;
-  for (size_t k = 0; k < order.size(); ++k)
-    for (int t = 0; !near[k].empty() && t < params.pair_partners; ++t) tried.emplace_back(order[k], near[k][rng() % near[k].size()]);
+  for (size_t first = 0; first < order.size(); first += kBlock) {
+    const size_t count = std::min(kBlock, order.size() - first);
+#pragma omp parallel for schedule(dynamic, 4)
+    for (size_t k = 0; k < count; ++k) {
+      const Eigen::Vector3f& s_a = anchor_points[order[first + k]];
+      anchor_tree.within(s_a, diameter, near[k]);
+      std::erase_if(near[k], [&](size_t b) { return (anchor_points[b] - s_a).norm() < min_distance; });
+    }
+    for (size_t k = 0; k < count; ++k)
+      for (int t = 0; !near[k].empty() && t < params.pair_partners; ++t) tried.emplace_back(order[first + k], near[k][rng() % near[k].size()]);
+  }
   std::vector<std::vector<PoseHypothesis>> of_pair(tried.size());
 #pragma omp parallel for schedule(dynamic, 16)
   for (size_t k = 0; k < tried.size(); ++k) {

@@ -1,12 +1,12 @@
 #include "artisan/perception/spin_image.hpp"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <optional>
 #include <string>
 
 #include "artisan/core/error.hpp"
+#include "open_table.hpp"
 
 namespace artisan {
 
@@ -71,7 +71,9 @@ class CellMeans {
     const auto key = (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.x() * inv_)) & 0x1fffff) << 42) |
                      (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.y() * inv_)) & 0x1fffff) << 21) |
                      (static_cast<uint64_t>(static_cast<int64_t>(std::floor(p.z() * inv_)) & 0x1fffff));
-    Cell& c = cells_[index_of(key)];
+    const auto [place, inserted] = index_.insert(key, cells_.size());
+    if (inserted) cells_.emplace_back();
+    Cell& c = cells_[*place];
     c.sum_p += p;
     c.sum_n += normal.cast<double>();
     ++c.count;
@@ -93,33 +95,8 @@ class CellMeans {
     Eigen::Vector3d sum_n = Eigen::Vector3d::Zero();
     int count = 0;
   };
-  // The cell's place in cells_, a new one appended for a key not seen yet: an open-addressing
-  // table with linear probing (no node allocated per cell, as std::unordered_map does).
-  size_t index_of(uint64_t key) {
-    if (2 * (cells_.size() + 1) > keys_.size()) grow();
-    size_t i = slot(key);
-    while (keys_[i] != kFree && keys_[i] != key) i = (i + 1) & (keys_.size() - 1);
-    if (keys_[i] == kFree) keys_[i] = key, places_[i] = cells_.size(), cells_.emplace_back();
-    return places_[i];
-  }
-  void grow() {
-    std::vector<uint64_t> keys(std::max<size_t>(1024, 2 * keys_.size()), kFree);
-    std::vector<size_t> places(keys.size());
-    keys_.swap(keys), places_.swap(places);
-    shift_ = 64 - std::countr_zero(keys_.size());
-    for (size_t k = 0; k < keys.size(); ++k) {
-      if (keys[k] == kFree) continue;
-      size_t i = slot(keys[k]);
-      while (keys_[i] != kFree) i = (i + 1) & (keys_.size() - 1);
-      keys_[i] = keys[k], places_[i] = places[k];
-    }
-  }
-  size_t slot(uint64_t key) const { return static_cast<size_t>((key * 0x9e3779b97f4a7c15ull) >> shift_); }
-  static constexpr uint64_t kFree = ~uint64_t{0};  // no cell's key: keys use 63 bits
   double inv_;
-  std::vector<uint64_t> keys_;  ///< a cell's key per slot, or kFree
-  std::vector<size_t> places_;  ///< into cells_, per slot
-  int shift_ = 64;
+  detail::OpenTable<size_t> index_;  ///< into cells_, by cell
   std::vector<Cell> cells_;
 };
 }  // namespace
