@@ -340,6 +340,7 @@ int main(int argc, char** argv) {
       else if (k == "coarse_refined") tuned.coarse_refined = int(v);
       else if (k == "max_instances") tuned.max_instances = int(v);
       else if (k == "max_continued_fraction") tuned.max_continued_fraction = v;
+      else if (k == "max_continued_fraction_fixed") tuned.max_continued_fraction_fixed = v;
       else if (k == "max_through_fraction") tuned.max_through_fraction = v;
       else if (k == "no_votes_on_support") tuned.no_votes_on_support = v != 0;
       else if (k == "axis_hypotheses") tuned.axis_hypotheses = v != 0;

@@ -24,6 +24,7 @@
 #include "correspondence_grouping.hpp"
 #include "open_table.hpp"
 #include "point_pair_voting.hpp"
+#include "slippage.hpp"
 
 namespace artisan {
 
@@ -788,13 +789,15 @@ struct Slack {
   double continued = 1;   ///< times the continued-surface limit
 };
 // What something hid is not held against the overlap either; but what is seen must be more
-// than one plane (a part's flat face "found" on a wall or box, the rest hidden in it).
-bool meets_tests(const IcpResult& icp, const FreeSpace::Check& seen, const RecognitionParams& params, double res, const Slack& slack) {
+// than one plane (a part's flat face "found" on a wall or box, the rest hidden in it). `slides`:
+// whether the model slides along itself (SpinImageLibrary::slides), which sets the
+// continued-surface limit of the unslackened test; a slackened one is a multiple of the looser.
+bool meets_tests(const IcpResult& icp, const FreeSpace::Check& seen, const RecognitionParams& params, double res, const Slack& slack, bool slides) {
   const double required_overlap = std::max(params.min_model_overlap * (1 - seen.occluded), params.min_overlap_floor);
+  const double continued_limit = slack.continued != 1 || slides ? slack.continued * params.max_continued_fraction : params.max_continued_fraction_fixed;
   return icp.overlap_fraction >= slack.overlap * required_overlap && icp.rmse_m <= slack.rmse * params.max_rmse_factor * res &&
          seen.free_space <= slack.free_space * params.max_free_space_fraction && seen.explained >= params.min_visible_explained - slack.explained &&
-         seen.planarity <= params.max_support_planarity + slack.planarity && seen.continued <= slack.continued * params.max_continued_fraction &&
-         seen.through <= params.max_through_fraction;
+         seen.planarity <= params.max_support_planarity + slack.planarity && seen.continued <= continued_limit && seen.through <= params.max_through_fraction;
 }
 
 // The tests on the ICP's own figures, which no check loosens: the residual, and the overlap floor
@@ -1090,6 +1093,7 @@ void SpinImageLibrary::compress() {
         }
       m.round_parts = std::make_shared<const std::vector<detail::ModelCylinder>>(std::move(parts));
       uint64_t state = 0x9e3779b97f4a7c15ull;
+      m.slides = detail::slides_along_itself(m.points, params_.resolution_m);
       m.planar_points = largest_plane(m.points, std::vector<char>(m.points.points.size(), 0), params_.resolution_m, state).count;
     }
     if (m.pairs) continue;
@@ -1253,8 +1257,11 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     const auto taken = std::count_if(on.begin(), on.end(), [&](size_t s) { return explained[s]; });
     return static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on.size());
   };
-  const auto meets = [&](const IcpResult& icp, const FreeSpace::Check& seen, const Slack& slack) { return meets_tests(icp, seen, params, res, slack); };
-  const auto passes = [&](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(icp, seen, {}); };
+  // The tests for model m, and the unslackened ones.
+  const auto meets = [&](size_t m, const IcpResult& icp, const FreeSpace::Check& seen, const Slack& slack) {
+    return meets_tests(icp, seen, params, res, slack, library.slides(m));
+  };
+  const auto passes_of = [&](size_t m) { return [&meets, m](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(m, icp, seen, {}); }; };
   // A coarse pose far from passing is refused without the fine ICP, which moves a pose by a
   // fraction of a resolution (on the clutter bench's first 12 scenes this screen let through all
   // 48 coarse poses that went on to pass, and stopped 482 of the 688 that failed).
@@ -1395,6 +1402,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // the fine ICP and the visibility tests wins.
   const auto search = [&](Search& s) {
     const PointCloud& model = library.model_points(s.m);
+    const auto passes = passes_of(s.m);
     s.verified.clear();
     s.winner.reset();
     s.coarse_poses.clear();
@@ -1436,8 +1444,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
         // or turned on a box top) would be refused again: not refined.
         if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
-        const auto screened = [&](const FreeSpace::Check& rest) { return meets(v.icp, rest, promising); };
-        if (!meets(v.icp, v.seen.emplace(free_space.check(model, v.T, screened, params.max_through_fraction)), promising)) continue;
+        const auto screened = [&](const FreeSpace::Check& rest) { return meets(s.m, v.icp, rest, promising); };
+        if (!meets(s.m, v.icp, v.seen.emplace(free_space.check(model, v.T, screened, params.max_through_fraction)), promising)) continue;
         ++refined;
         if (v.icp.rmse_m > kRefinedRmse * params.max_rmse_factor * res) {
           refused_on_plane(s, v.T, *v.seen);  // its coarse figures stand for the refined pose's (below)
@@ -1448,7 +1456,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         v.seen.emplace(free_space.check(model, v.T));
         // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
         // what keeps the pose from passing; so is a flange's along its neck's.
-        if (const auto* axis = slide_axis(s.m); axis && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, near_passing))
+        if (const auto* axis = slide_axis(s.m); axis && !passes(v.icp, *v.seen) && meets(s.m, v.icp, *v.seen, near_passing))
           if (auto slid = slid_along_axis(model, *axis, v.T, scene_points, scene_tree, free_space, fine, params, res, passes))
             v.move_to(*slid);
         // A part the ICP fits to the scene (its overlap and residual pass) that the visibility tests
@@ -1456,7 +1464,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         // stem where the sensor saw through it. Its turns are tried; one that passes takes its place
         // when it leaves less than half of what the sensor should have seen of it hidden (on a part
         // mostly hidden, a turn that puts the rest where nothing contradicts it proves little).
-        if (turned_refused < params.refused_turns && !passes(v.icp, *v.seen) && meets(v.icp, *v.seen, fits_only)) {
+        if (turned_refused < params.refused_turns && !passes(v.icp, *v.seen) && meets(s.m, v.icp, *v.seen, fits_only)) {
           ++turned_refused;
           constexpr double kAny = -std::numeric_limits<double>::infinity();
           auto turns = turns_of(model, library.turn_axes(s.m), v.T, kAny, kAny, scene_points, scene_tree, free_space, coarse, fine, params, res,
@@ -1674,7 +1682,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       std::stable_sort(rivals.begin(), rivals.end(), [](const IcpResult* a, const IcpResult* b) { return a->overlap_fraction > b->overlap_fraction; });
       for (size_t k = 0; k < rivals.size() && k < 3 && !found.ambiguous; ++k) {
         const Transform& T = rivals[k]->T_target_source;
-        if (passes(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model, T)) ambiguous_with(next->m, T);
+        if (passes_of(next->m)(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model, T)) ambiguous_with(next->m, T);
       }
     }
     result.instances.push_back(found);
@@ -1740,7 +1748,7 @@ RecognitionCandidate check_pose(const TriangleMesh& scene, SpinImageLibrary& lib
   if (!refine) icp.T_target_source = T_scene_model;
   const FreeSpace::Check seen = free_space.check(model, icp.T_target_source);
   RecognitionCandidate c = candidate_of(model_index, icp.T_target_source, icp, &seen);
-  c.stage = meets_tests(icp, seen, params, res, {}) ? RecognitionCandidate::Stage::accepted : RecognitionCandidate::Stage::refused;
+  c.stage = meets_tests(icp, seen, params, res, {}, library.slides(model_index)) ? RecognitionCandidate::Stage::accepted : RecognitionCandidate::Stage::refused;
   return c;
 }
 

@@ -309,7 +309,7 @@ TEST(Recognition, AFaceFlushWithALargerSurfaceHasNoSilhouetteAndIsNoInstance) {
   EXPECT_EQ(found_at_pose(on_table, params), std::make_pair(size_t{1}, 1)) << "the flange on a table";
   EXPECT_EQ(found_at_pose(flush, params).first, 0u) << "the flange sunk up to its face";
   RecognitionParams no_silhouette = params;
-  no_silhouette.max_continued_fraction = 1.0;
+  no_silhouette.max_continued_fraction = no_silhouette.max_continued_fraction_fixed = 1.0;  // a flange does not slide: the second is its limit
   // Sunk 20 mm at its pose, its hub above the plane and its disc under it, it also goes through
   // the plane's face (max_through_fraction): refused at its pose by that alone.
   EXPECT_EQ(found_at_pose(flush, no_silhouette).second, 0) << "without the silhouette test, through the plane";
@@ -872,6 +872,36 @@ TEST(Recognition, ATeeOnAPipesRunWithItsBranchHiddenIsAmbiguousWithThePipe) {
 // of it); moved 3 cm toward the sensor, in space the sensor saw through, it must be refused with
 // more than the free-space limit of its surface there; a model index beyond the library, and a
 // pose that is not finite, must throw.
+// A flange's face fits the table's near rim (a 20 by 60 mm bar) with the bar carrying on past
+// its outline, 2.5% of its explained surface, under the 3% limit that holds for parts that
+// slide along themselves (a pipe, an elbow: their refined poses may sit a little off along the
+// slide); a flange does not slide (its turn about its axis is a symmetry) and is held to 1.5%
+// (max_continued_fraction_fixed). Method: bench_recognition's scene 311
+// (data/recognition/clutter-scene311, held out). Held to 3% the false flange is accepted - this
+// test expects it, so that the scene keeps testing the limit; held to its own, every instance
+// must be true, and every part found before must still be found.
+TEST(Recognition, AFlangeOnTheTablesRimIsHeldToTheLimitOfPartsThatDoNotSlide) {
+  const auto kept = kept_scene("clutter-scene311");
+  RecognitionParams as_sliding;
+  as_sliding.max_continued_fraction_fixed = as_sliding.max_continued_fraction;
+  const auto before = recognize_kept(kept, kBenchLibrary, as_sliding);
+  const auto is_false = [&](const KeptRecognition& run, const RecognizedInstance& inst) {
+    return run.nearest_true(kept, inst) >= 0.1f * run.models.at(inst.model).diameter;
+  };
+  EXPECT_TRUE(std::any_of(before.result.instances.begin(), before.result.instances.end(),
+                          [&](const RecognizedInstance& inst) { return inst.model == "flange" && is_false(before, inst); }))
+      << "no false flange at the sliding parts' limit: the scene no longer tests the limit";
+  const auto after = recognize_kept(kept, kBenchLibrary);
+  expect_every_instance_true(after, kept);
+  size_t found_before = 0;
+  for (const auto& o : kept.objects) {
+    if (!before.found(o)) continue;
+    ++found_before;
+    EXPECT_TRUE(after.found(o)) << o.name << " found at the sliding parts' limit, not at its own";
+  }
+  EXPECT_GE(found_before, 5u);
+}
+
 TEST(Recognition, CheckPoseMeasuresAGivenPose) {
   const auto kept = kept_scene("clutter-scene38");
   const auto& flange = *kept.object("flange#3");
