@@ -11,7 +11,9 @@
 #include <numbers>
 #include <optional>
 #include <random>
+#include <string>
 #include <unordered_map>
+#include <utility>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -794,10 +796,12 @@ struct Slack {
 // continued-surface limit of the unslackened test; a slackened one is a multiple of the looser.
 bool meets_tests(const IcpResult& icp, const FreeSpace::Check& seen, const RecognitionParams& params, double res, const Slack& slack, bool slides) {
   const double required_overlap = std::max(params.min_model_overlap * (1 - seen.occluded), params.min_overlap_floor);
-  const double continued_limit = slack.continued != 1 || slides ? slack.continued * params.max_continued_fraction : params.max_continued_fraction_fixed;
+  const double continued_limit =
+      slack.continued != 1 || slides ? slack.continued * params.max_continued_fraction : params.max_continued_fraction_fixed;
   return icp.overlap_fraction >= slack.overlap * required_overlap && icp.rmse_m <= slack.rmse * params.max_rmse_factor * res &&
          seen.free_space <= slack.free_space * params.max_free_space_fraction && seen.explained >= params.min_visible_explained - slack.explained &&
-         seen.planarity <= params.max_support_planarity + slack.planarity && seen.continued <= continued_limit && seen.through <= params.max_through_fraction;
+         seen.planarity <= params.max_support_planarity + slack.planarity && seen.continued <= continued_limit &&
+         seen.through <= params.max_through_fraction;
 }
 
 // The tests on the ICP's own figures, which no check loosens: the residual, and the overlap floor
@@ -829,6 +833,9 @@ void check_inputs(const TriangleMesh& scene, const SpinImageLibrary& library, co
   if (scene.faces.empty()) throw Error("recognition: the scene mesh has no faces");
   if (library.model_count() == 0) throw Error("recognition: the model library is empty");
   if (!(params.axis_step_factor > 0)) throw Error("recognition: axis_step_factor " + std::to_string(params.axis_step_factor) + " must be positive");
+  for (const auto& [name, limit] : {std::pair{"max_continued_fraction", params.max_continued_fraction},
+                                    std::pair{"max_continued_fraction_fixed", params.max_continued_fraction_fixed}})
+    if (!(limit >= 0)) throw Error(std::string("recognition: ") + name + " " + std::to_string(limit) + " must not be negative");
   if (!(params.max_incidence_deg > 0 && params.max_incidence_deg <= 90))
     throw Error("recognition: max_incidence_deg " + std::to_string(params.max_incidence_deg) + " must lie in (0, 90]");
   if (!(params.own_bin_min_incidence_deg > 0 && params.own_bin_min_incidence_deg <= 90))
@@ -1261,7 +1268,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   const auto meets = [&](size_t m, const IcpResult& icp, const FreeSpace::Check& seen, const Slack& slack) {
     return meets_tests(icp, seen, params, res, slack, library.slides(m));
   };
-  const auto passes_of = [&](size_t m) { return [&meets, m](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(m, icp, seen, {}); }; };
+  const auto passes_of = [&](size_t m) {
+    return [&meets, m](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(m, icp, seen, {}); };
+  };
   // A coarse pose far from passing is refused without the fine ICP, which moves a pose by a
   // fraction of a resolution (on the clutter bench's first 12 scenes this screen let through all
   // 48 coarse poses that went on to pass, and stopped 482 of the 688 that failed).
@@ -1318,6 +1327,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // (refused for it; with drop_refused_planes): the scene surface under it, and when that is mostly
   // one plane, the plane as far as the model reaches, no longer support the model (its face would
   // slide or turn there).
+  // (The continued surface counts here above max_continued_fraction for every model: a pose of a
+  // part that does not slide refused between its own limit and that one keeps its surface.)
   const auto refused_on_plane = [&](Search& s, const Transform& T_scene_model, const FreeSpace::Check& seen) {
     if (!params.drop_refused_planes || !(seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction)) return;
     const double planarity = seen.planarity;
@@ -1748,7 +1759,8 @@ RecognitionCandidate check_pose(const TriangleMesh& scene, SpinImageLibrary& lib
   if (!refine) icp.T_target_source = T_scene_model;
   const FreeSpace::Check seen = free_space.check(model, icp.T_target_source);
   RecognitionCandidate c = candidate_of(model_index, icp.T_target_source, icp, &seen);
-  c.stage = meets_tests(icp, seen, params, res, {}, library.slides(model_index)) ? RecognitionCandidate::Stage::accepted : RecognitionCandidate::Stage::refused;
+  const bool passed = meets_tests(icp, seen, params, res, {}, library.slides(model_index));
+  c.stage = passed ? RecognitionCandidate::Stage::accepted : RecognitionCandidate::Stage::refused;
   return c;
 }
 

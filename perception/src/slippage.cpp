@@ -42,7 +42,8 @@ bool slides_along_itself(const PointCloud& model, double res, double max_ratio) 
     if (const double angle = amount * w.norm(); angle > 0) motion.linear() = Eigen::AngleAxisd(angle, w.normalized()).toRotationMatrix();
     motion.translation() = centre - motion.linear() * centre + amount * t;
     const Eigen::Isometry3f moved = motion.cast<float>();
-    const auto off = std::count_if(model.points.begin(), model.points.end(), [&](const Eigen::Vector3f& p) { return tree.nearest(moved * p).second > tolerance2; });
+    const auto off = std::count_if(model.points.begin(), model.points.end(),
+                                   [&](const Eigen::Vector3f& p) { return tree.nearest(moved * p).second > tolerance2; });
     if (static_cast<double>(off) > 0.01 * static_cast<double>(n)) return true;
   }
   return false;

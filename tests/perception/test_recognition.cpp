@@ -309,7 +309,8 @@ TEST(Recognition, AFaceFlushWithALargerSurfaceHasNoSilhouetteAndIsNoInstance) {
   EXPECT_EQ(found_at_pose(on_table, params), std::make_pair(size_t{1}, 1)) << "the flange on a table";
   EXPECT_EQ(found_at_pose(flush, params).first, 0u) << "the flange sunk up to its face";
   RecognitionParams no_silhouette = params;
-  no_silhouette.max_continued_fraction = no_silhouette.max_continued_fraction_fixed = 1.0;  // a flange does not slide: the second is its limit
+  // A flange does not slide along itself: max_continued_fraction_fixed is its limit.
+  no_silhouette.max_continued_fraction = no_silhouette.max_continued_fraction_fixed = 1.0;
   // Sunk 20 mm at its pose, its hub above the plane and its disc under it, it also goes through
   // the plane's face (max_through_fraction): refused at its pose by that alone.
   EXPECT_EQ(found_at_pose(flush, no_silhouette).second, 0) << "without the silhouette test, through the plane";
@@ -331,6 +332,14 @@ TEST(Recognition, BadInputThrows) {
     RecognitionParams bad_grazing;
     bad_grazing.own_bin_min_incidence_deg = incidence;
     EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad_grazing), Error) << incidence;
+  }
+  for (const double limit : {-0.01, std::numeric_limits<double>::quiet_NaN()}) {
+    RecognitionParams bad_continued;
+    bad_continued.max_continued_fraction = limit;
+    EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad_continued), Error) << limit;
+    RecognitionParams bad_fixed;
+    bad_fixed.max_continued_fraction_fixed = limit;
+    EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad_fixed), Error) << limit;
   }
   SpinImageLibrary lib;
   lib.add_model("bunny", scan_mesh("bun000"));
