@@ -19,6 +19,14 @@ namespace {
 constexpr uint8_t kConsistent = 1, kGroupable = 2;
 
 uint8_t agreement(const PointCloud& src, const PointCloud& tgt, const Correspondence& a, const Correspondence& b, float gamma, float t_gc) {
+  // A point's spin coordinates about another keep their distance (alpha^2 + beta^2 = |b - a|^2),
+  // so the disagreement below is at least the two lengths' relative difference: pairs whose
+  // lengths differ by T_gc or more (most, in clutter) disagree whatever their normals. The
+  // margin keeps rounding from refusing a pair the full measure would keep.
+  const float source_length = (src.points[b.source] - src.points[a.source]).norm();
+  const float target_length = (tgt.points[b.target] - tgt.points[a.target]).norm();
+  if (std::abs(source_length - target_length) >= 1.001f * t_gc * 0.5f * (source_length + target_length) && source_length + target_length > 0)
+    return 0;
   const Eigen::Vector2f s_ab = spin_coordinates(src.points[a.source], src.normals[a.source], src.points[b.source]);
   const Eigen::Vector2f t_ab = spin_coordinates(tgt.points[a.target], tgt.normals[a.target], tgt.points[b.target]);
   const Eigen::Vector2f s_ba = spin_coordinates(src.points[b.source], src.normals[b.source], src.points[a.source]);
