@@ -325,21 +325,19 @@ TEST(Recognition, BadInputThrows) {
   RecognitionParams no_step;
   no_step.axis_step_factor = 0;
   EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), no_step), Error);
+  // One parameter set to a bad value (`set`), the rest the defaults.
+  const auto expect_refused = [](double value, void (*set)(RecognitionParams&, double)) {
+    RecognitionParams bad;
+    set(bad, value);
+    EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad), Error) << value;
+  };
   for (const double incidence : {0.0, 95.0, std::numeric_limits<double>::quiet_NaN()}) {
-    RecognitionParams bad_incidence;
-    bad_incidence.max_incidence_deg = incidence;
-    EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad_incidence), Error) << incidence;
-    RecognitionParams bad_grazing;
-    bad_grazing.own_bin_min_incidence_deg = incidence;
-    EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad_grazing), Error) << incidence;
+    expect_refused(incidence, [](RecognitionParams& p, double v) { p.max_incidence_deg = v; });
+    expect_refused(incidence, [](RecognitionParams& p, double v) { p.own_bin_min_incidence_deg = v; });
   }
   for (const double limit : {-0.01, std::numeric_limits<double>::quiet_NaN()}) {
-    RecognitionParams bad_continued;
-    bad_continued.max_continued_fraction = limit;
-    EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad_continued), Error) << limit;
-    RecognitionParams bad_fixed;
-    bad_fixed.max_continued_fraction_fixed = limit;
-    EXPECT_THROW(recognize(scan_mesh("bun000"), bunny_library(), bad_fixed), Error) << limit;
+    expect_refused(limit, [](RecognitionParams& p, double v) { p.max_continued_fraction = v; });
+    expect_refused(limit, [](RecognitionParams& p, double v) { p.max_continued_fraction_fixed = v; });
   }
   SpinImageLibrary lib;
   lib.add_model("bunny", scan_mesh("bun000"));
