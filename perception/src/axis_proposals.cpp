@@ -1,4 +1,5 @@
 #include "axis_proposals.hpp"
+#include "slippage.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -91,11 +92,7 @@ bool round_about(const PointCloud& model, const Eigen::Vector3d& axis_point, con
   const KdTree3 tree(model.points);
   const Eigen::AngleAxisd seventh(2 * std::numbers::pi / 7, axis_direction.normalized());
   const Eigen::Isometry3f turn = (Eigen::Translation3d(axis_point) * seventh * Eigen::Translation3d(-axis_point)).cast<float>();
-  const auto tolerance2 = static_cast<float>(std::pow(1.5 * res, 2));
-  const size_t step = std::max<size_t>(1, model.points.size() / 64);
-  for (size_t i = 0; i < model.points.size(); i += step)
-    if (tree.nearest(turn * model.points[i]).second > tolerance2) return false;
-  return true;
+  return share_moved_off(model, tree, turn, 1.5 * res, std::max<size_t>(1, model.points.size() / 64)) == 0;
 }
 
 namespace {

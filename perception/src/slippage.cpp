@@ -7,9 +7,16 @@
 #include <Eigen/Geometry>
 
 #include "artisan/core/pose.hpp"
-#include "artisan/perception/kdtree.hpp"
 
 namespace artisan::detail {
+
+double share_moved_off(const PointCloud& model, const KdTree3& tree, const Eigen::Isometry3f& motion, double tolerance, size_t step) {
+  const auto tolerance2 = static_cast<float>(tolerance * tolerance);
+  size_t tried = 0, off = 0;
+  for (size_t i = 0; i < model.points.size(); i += std::max<size_t>(step, 1), ++tried)
+    off += tree.nearest(motion * model.points[i]).second > tolerance2;
+  return tried ? static_cast<double>(off) / static_cast<double>(tried) : 0.0;
+}
 
 bool slides_along_itself(const PointCloud& model, double res, double max_ratio) {
   const size_t n = model.points.size();
@@ -31,7 +38,6 @@ bool slides_along_itself(const PointCloud& model, double res, double max_ratio) 
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(normal_equations);
   const KdTree3 tree(model.points);
-  const auto tolerance2 = static_cast<float>(std::pow(1.5 * res, 2));
   for (int k = 0; k < 6 && eig.eigenvalues()[k] <= max_ratio * eig.eigenvalues()[5]; ++k) {
     const Eigen::Vector3d w = eig.eigenvectors().col(k).head<3>() / scale, t = eig.eigenvectors().col(k).tail<3>();
     double largest = 0;  // the largest move per unit of the twist
@@ -41,10 +47,7 @@ bool slides_along_itself(const PointCloud& model, double res, double max_ratio) 
     Transform motion = Transform::Identity();
     if (const double angle = amount * w.norm(); angle > 0) motion.linear() = Eigen::AngleAxisd(angle, w.normalized()).toRotationMatrix();
     motion.translation() = centre - motion.linear() * centre + amount * t;
-    const Eigen::Isometry3f moved = motion.cast<float>();
-    const auto off = std::count_if(model.points.begin(), model.points.end(),
-                                   [&](const Eigen::Vector3f& p) { return tree.nearest(moved * p).second > tolerance2; });
-    if (static_cast<double>(off) > 0.01 * static_cast<double>(n)) return true;
+    if (share_moved_off(model, tree, motion.cast<float>(), 1.5 * res) > 0.01) return true;
   }
   return false;
 }

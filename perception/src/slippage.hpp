@@ -4,9 +4,19 @@
 // along its tangent plane, to first order, leave a point-to-plane fit no hold on the pose. A
 // pipe slides along its axis, an elbow about its bend; a flange turns about its axis too, but
 // that turn maps it onto itself (a symmetry, no other pose); a tee or a valve does not slide.
+#include <cstddef>
+
+#include <Eigen/Geometry>
+
 #include "artisan/core/triangle_mesh.hpp"
+#include "artisan/perception/kdtree.hpp"
 
 namespace artisan::detail {
+
+/// The share of every `step`-th model point that `motion` moves more than `tolerance` [m] from
+/// the model's surface (its points, which `tree` indexes): 0 when the motion maps the surface
+/// onto itself (a symmetry).
+double share_moved_off(const PointCloud& model, const KdTree3& tree, const Eigen::Isometry3f& motion, double tolerance, size_t step = 1);
 
 /// Whether some motion moves the model's surface along itself without being a symmetry of it.
 /// The motions: the eigenvectors of the point-to-plane normal equations' 6x6 matrix (rotations
