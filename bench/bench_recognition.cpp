@@ -329,6 +329,7 @@ int main(int argc, char** argv) {
       else if (k == "pair_pool") tuned.pair_pool = int(v);
       else if (k == "axis_slide_steps") tuned.axis_slide_steps = int(v);
       else if (k == "winner_slides") tuned.winner_slides = v != 0;
+      else if (k == "bend_slides") tuned.bend_slides = v != 0;
       else if (k == "search_rounds") tuned.search_rounds = int(v);
       else if (k == "free_space_own_bin") tuned.free_space_own_bin = v != 0;
       else if (k == "own_bin_min_incidence_deg") tuned.own_bin_min_incidence_deg = v;

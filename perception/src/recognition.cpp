@@ -940,14 +940,15 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
   return out;
 }
 
-// A straight pipe's pose (a model with a cylinder) slid along its axis by every whole number of
-// resolutions up to axis_slide_steps either way, each refined by the fine ICP; of those that pass every
-// test (`passes`), the one with the most of the model on the scene less its share in free
-// space, or none. Point-to-plane ICP hardly holds a pipe's place along its axis (only its rims
-// do): a pose a few millimetres short of the seen end leaves the scene's pipe carrying on past
-// the model's outline, one beyond it puts the end in free space.
+// A pose of a model that slides along itself (detail::Slide: a straight pipe along its axis, an
+// elbow about its bend; a flange along its neck's) slid by every whole number of resolutions up
+// to axis_slide_steps either way, each refined by the fine ICP; of those that pass every test
+// (`passes`), the one with the most of the model on the scene less its share in free space, or
+// none. Point-to-plane ICP hardly holds such a pose along its slide (only its rims do): a pipe a
+// few millimetres short of the seen end leaves the scene's pipe carrying on past the model's
+// outline, one beyond it puts the end in free space.
 template <typename Passes>
-std::optional<Moved> slid_along_axis(const PointCloud& model, const detail::ModelCylinder& cylinder, const Transform& T_scene_model, const PointCloud& scene,
+std::optional<Moved> slid_along(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, const PointCloud& scene,
                                      const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params,
                                      double res, const Passes& passes) {
   if (params.axis_slide_steps < 1) return std::nullopt;
@@ -955,8 +956,7 @@ std::optional<Moved> slid_along_axis(const PointCloud& model, const detail::Mode
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t k = 0; k < slid.size(); ++k) {
     const int shift = (k % 2 ? -1 : 1) * static_cast<int>(k / 2 + 1);
-    slid[k] = refined_from(model, T_scene_model * Eigen::Translation3d(cylinder.direction * (shift * res)), scene, scene_tree, free_space, fine,
-                           params, res, passes);
+    slid[k] = refined_from(model, T_scene_model * slide.by(shift * res), scene, scene_tree, free_space, fine, params, res, passes);
   }
   std::optional<Moved> best;
   for (const auto& m : slid)
@@ -964,41 +964,44 @@ std::optional<Moved> slid_along_axis(const PointCloud& model, const detail::Mode
   return best;
 }
 
-// A straight pipe's winning pose slid along its axis by every axis step up to half its length
-// either way, where the whole seen pipe could lie (when both its ends are hidden, the ICP and
-// the tests leave its place along the run open): of the slides that put about as much of the
-// model on the scene (the fine ICP's figures at the slid pose, less rival_coarse_slack), the
-// one with the most on the scene less its share in free space, refined; it replaces the winner
-// when it passes and scores more than `score` by rival_margin. A pipe that carries on into space
-// the sensor saw through is wrong however well its seen part fits.
+// A winning pose of a model that slides along itself (a straight pipe, an elbow) slid by every
+// axis step up to half its extent along the slide either way, where the whole seen part could lie
+// (when both a pipe's ends are hidden, the ICP and the tests leave its place along the run open):
+// of the slides that put about as much of the model on the scene (the fine ICP's figures at the
+// slid pose, less rival_coarse_slack), the one with the most on the scene less its share in free
+// space, refined; it replaces the winner when it passes and scores more than `score` by
+// rival_margin. A pipe that carries on into space the sensor saw through is wrong however well
+// its seen part fits.
 template <typename Passes, typename Taken>
-std::optional<Moved> best_slide(const PointCloud& model, const detail::ModelCylinder& cylinder, const Transform& T_scene_model, double overlap,
+std::optional<Moved> best_slide(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, double overlap,
                                 double score, const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space,
                                 const IcpSettings& fine, const RecognitionParams& params, double res, const Passes& passes, const Taken& taken) {
   const double step = params.axis_step_factor * res;
-  const auto steps = static_cast<int>(0.5 * (cylinder.end - cylinder.start) / step);
+  const auto steps = static_cast<int>(0.5 * slide.extent / step);
   if (!params.winner_slides || steps < 1) return std::nullopt;
   IcpSettings at_pose = fine;
   at_pose.max_iterations = 1;  // its overlap is that of the pose it starts from
-  struct Slide {
+  struct Slid {
     Transform T;
     double score = -std::numeric_limits<double>::infinity();
   };
-  std::vector<Slide> slides(2 * static_cast<size_t>(steps));
+  std::vector<Slid> slides(2 * static_cast<size_t>(steps));
 #pragma omp parallel for schedule(dynamic, 4)
   for (size_t k = 0; k < slides.size(); ++k) {
     const int shift = (k % 2 ? -1 : 1) * static_cast<int>(k / 2 + 1);
-    Slide& slide = slides[k];
-    slide.T = T_scene_model * Eigen::Translation3d(cylinder.direction * (shift * step));
-    const double on_scene = icp_point_to_plane(model, scene, scene_tree, slide.T, at_pose).overlap_fraction;
+    Slid& slid = slides[k];
+    slid.T = T_scene_model * slide.by(shift * step);
+    const double on_scene = icp_point_to_plane(model, scene, scene_tree, slid.T, at_pose).overlap_fraction;
     if (on_scene < overlap - params.rival_coarse_slack) continue;
     // Its share in free space alone: the seen surface carried on past it is not measured.
-    slide.score = on_scene - free_space.check(model, slide.T, [](const FreeSpace::Check&) { return false; }).free_space;
+    slid.score = on_scene - free_space.check(model, slid.T, [](const FreeSpace::Check&) { return false; }).free_space;
   }
-  const auto best = std::max_element(slides.begin(), slides.end(), [](const Slide& a, const Slide& b) { return a.score < b.score; });
-  if (!(best->score > score + params.rival_margin)) return std::nullopt;  // steps >= 1: there are slides
+  const auto best = std::max_element(slides.begin(), slides.end(), [](const Slid& a, const Slid& b) { return a.score < b.score; });
+  // A slide by a turn (an elbow about its bend) is held to the margin of the winner's turns.
+  const double margin = slide.radius > 0 ? params.turn_margin : params.rival_margin;
+  if (!(best->score > score + margin)) return std::nullopt;  // steps >= 1: there are slides
   Moved moved = refined_from(model, best->T, scene, scene_tree, free_space, fine, params, res, passes);
-  if (!moved.passed || !(moved.icp.overlap_fraction - moved.seen.free_space > score + params.rival_margin) || taken(moved.icp.T_target_source))
+  if (!moved.passed || !(moved.icp.overlap_fraction - moved.seen.free_space > score + margin) || taken(moved.icp.T_target_source))
     return std::nullopt;
   return moved;
 }
@@ -1054,7 +1057,7 @@ void SpinImageLibrary::add_precomputed_model(const std::string& name, PointCloud
     throw Error("spin-image library: precomputed model \"" + name + "\" has " + std::to_string(images.rows()) + " x " +
                 std::to_string(images.cols()) + " spin images for " + std::to_string(points.points.size()) + " points; expected " +
                 std::to_string(bins()) + " rows");
-  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}, {}, {}, 0});
+  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}, {}, {}, 0, {}});
   compressed_ = false;
 }
 
@@ -1100,7 +1103,7 @@ void SpinImageLibrary::compress() {
         }
       m.round_parts = std::make_shared<const std::vector<detail::ModelCylinder>>(std::move(parts));
       uint64_t state = 0x9e3779b97f4a7c15ull;
-      m.slides = detail::slides_along_itself(m.points, params_.resolution_m);
+      if (auto slide = detail::slide_along_itself(m.points, params_.resolution_m)) m.slide = std::make_shared<const detail::Slide>(*slide);
       m.planar_points = largest_plane(m.points, std::vector<char>(m.points.points.size(), 0), params_.resolution_m, state).count;
     }
     if (m.pairs) continue;
@@ -1402,12 +1405,20 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     groups.insert(groups.end(), parts.begin(), parts.end());
     return groups;
   };
-  // The axis along which a refused pose of model m is slid: a pipe's, or (with
-  // round_part_hypotheses) its largest round part's; or none.
-  const auto slide_axis = [&](size_t m) -> const detail::ModelCylinder* {
-    if (const auto* cylinder = library.cylinder(m)) return cylinder;
+  // How a winning pose of model m is slid: along a pipe's axis, or (with bend_slides) by the
+  // model's own slide (an elbow about its bend); or not at all.
+  const auto winner_slide = [&](size_t m) -> std::optional<detail::Slide> {
+    if (const auto* c = library.cylinder(m)) return detail::shift_along(c->point, c->direction, c->end - c->start);
+    if (const auto* slide = library.slide(m); slide && params.bend_slides) return *slide;
+    return std::nullopt;
+  };
+  // How a refused pose of model m is slid: as a winner is, or else (with round_part_hypotheses)
+  // along its largest round part's axis (a flange's neck); or not at all.
+  const auto refused_slide = [&](size_t m) -> std::optional<detail::Slide> {
+    if (auto slide = winner_slide(m)) return slide;
     const auto& parts = library.round_parts(m);
-    return params.round_part_hypotheses && !parts.empty() ? &parts.front() : nullptr;
+    if (!params.round_part_hypotheses || parts.empty()) return std::nullopt;
+    return detail::shift_along(parts.front().point, parts.front().direction, parts.front().end - parts.front().start);
   };
   // The best starting poses are refined by the coarse ICP; in score order, the first that passes
   // the fine ICP and the visibility tests wins.
@@ -1467,8 +1478,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         v.seen.emplace(free_space.check(model, v.T));
         // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
         // what keeps the pose from passing; so is a flange's along its neck's.
-        if (const auto* axis = slide_axis(s.m); axis && !passes(v.icp, *v.seen) && meets(s.m, v.icp, *v.seen, near_passing))
-          if (auto slid = slid_along_axis(model, *axis, v.T, scene_points, scene_tree, free_space, fine, params, res, passes))
+        if (const auto slide = refused_slide(s.m); slide && !passes(v.icp, *v.seen) && meets(s.m, v.icp, *v.seen, near_passing))
+          if (auto slid = slid_along(model, *slide, v.T, scene_points, scene_tree, free_space, fine, params, res, passes))
             v.move_to(*slid);
         // A part the ICP fits to the scene (its overlap and residual pass) that the visibility tests
         // refuse may lie at the right place turned wrong about its run: a tee's branch or a valve's
@@ -1528,9 +1539,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         s.verified[rivals[j]].origin->done = !(params.losing_rivals_stay_open && ok[j] && rivals[j] != *s.winner);
       if (*s.winner != first_winner) winner_coarse = coarse_overlap(s.verified[*s.winner].T);
     }
-    if (const auto* cylinder = library.cylinder(s.m)) {
+    if (const auto slide = winner_slide(s.m)) {
       auto& w = s.verified[*s.winner];
-      if (auto slid = best_slide(model, *cylinder, w.T, w.icp.overlap_fraction, w.icp.overlap_fraction - w.seen->free_space, scene_points, scene_tree,
+      if (auto slid = best_slide(model, *slide, w.T, w.icp.overlap_fraction, w.icp.overlap_fraction - w.seen->free_space, scene_points, scene_tree,
                                  free_space, fine, params, res, passes, taken)) {
         w.move_to(*slid);
         winner_coarse = coarse_overlap(w.T);

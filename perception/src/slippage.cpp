@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <numbers>
+#include <vector>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -18,16 +21,63 @@ double share_moved_off(const PointCloud& model, const KdTree3& tree, const Eigen
   return tried ? static_cast<double>(off) / static_cast<double>(tried) : 0.0;
 }
 
-bool slides_along_itself(const PointCloud& model, double res, double max_ratio) {
+Transform Slide::by(double s) const {
+  if (radius <= 0) return Transform(Eigen::Translation3d(direction * s));
+  return Eigen::Translation3d(point) * Eigen::AngleAxisd(s / radius, direction) * Eigen::Translation3d(-point);
+}
+
+Slide shift_along(const Eigen::Vector3d& point, const Eigen::Vector3d& direction, double extent) {
+  return {.point = point, .direction = direction.normalized(), .radius = 0, .extent = extent};
+}
+
+namespace {
+
+// The slide a twist (w, t) of the points about `centre` (a point p moves by w x (p - c) + t) makes.
+Slide slide_of(const PointCloud& model, const Eigen::Vector3d& centre, const Eigen::Vector3d& w, const Eigen::Vector3d& t, double scale) {
+  const double turn = w.norm();
+  if (turn * scale < 0.05 * t.norm()) {
+    const Eigen::Vector3d d = t.normalized();
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (const auto& p : model.points) {
+      const double x = d.dot(p.cast<double>() - centre);
+      lo = std::min(lo, x), hi = std::max(hi, x);
+    }
+    return shift_along(centre, d, hi - lo);
+  }
+  // The screw axis: the points on it move along it alone.
+  Slide slide;
+  slide.direction = w / turn;
+  slide.point = centre + w.cross(t) / (turn * turn);
+  const Eigen::Vector3d u = slide.direction.unitOrthogonal(), v = slide.direction.cross(u);
+  std::vector<double> angles;
+  angles.reserve(model.points.size());
+  double sum2 = 0;
+  for (const auto& p : model.points) {
+    const Eigen::Vector3d r = p.cast<double>() - slide.point;
+    angles.push_back(std::atan2(v.dot(r), u.dot(r)));
+    sum2 += (r - slide.direction * slide.direction.dot(r)).squaredNorm();
+  }
+  slide.radius = std::sqrt(sum2 / static_cast<double>(model.points.size()));
+  // The arc the points span: the full turn less the widest gap between their angles.
+  std::sort(angles.begin(), angles.end());
+  double gap = angles.front() + 2 * std::numbers::pi - angles.back();
+  for (size_t i = 1; i < angles.size(); ++i) gap = std::max(gap, angles[i] - angles[i - 1]);
+  slide.extent = (2 * std::numbers::pi - gap) * slide.radius;
+  return slide;
+}
+
+}  // namespace
+
+std::optional<Slide> slide_along_itself(const PointCloud& model, double res, double max_ratio) {
   const size_t n = model.points.size();
-  if (n == 0 || model.normals.size() != n) return false;
+  if (n == 0 || model.normals.size() != n) return std::nullopt;
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
   for (const auto& p : model.points) centre += p.cast<double>();
   centre /= static_cast<double>(n);
   double scale = 0;
   for (const auto& p : model.points) scale += (p.cast<double>() - centre).squaredNorm();
   scale = std::sqrt(scale / static_cast<double>(n));
-  if (!(scale > 0)) return false;
+  if (!(scale > 0)) return std::nullopt;
   // A twist (w, t) moves point p by w x (p - c) + t, along its normal by ((p - c) x n) . w + n . t.
   Eigen::Matrix<double, 6, 6> normal_equations = Eigen::Matrix<double, 6, 6>::Zero();
   for (size_t i = 0; i < n; ++i) {
@@ -47,9 +97,9 @@ bool slides_along_itself(const PointCloud& model, double res, double max_ratio) 
     Transform motion = Transform::Identity();
     if (const double angle = amount * w.norm(); angle > 0) motion.linear() = Eigen::AngleAxisd(angle, w.normalized()).toRotationMatrix();
     motion.translation() = centre - motion.linear() * centre + amount * t;
-    if (share_moved_off(model, tree, motion.cast<float>(), 1.5 * res) > 0.01) return true;
+    if (share_moved_off(model, tree, motion.cast<float>(), 1.5 * res) > 0.01) return slide_of(model, centre, w, t, scale);
   }
-  return false;
+  return std::nullopt;
 }
 
 }  // namespace artisan::detail
