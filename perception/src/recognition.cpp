@@ -970,8 +970,8 @@ std::optional<Moved> slid_along(const PointCloud& model, const detail::Slide& sl
 // of the slides that put about as much of the model on the scene (the fine ICP's figures at the
 // slid pose, less rival_coarse_slack), the one with the most on the scene less its share in free
 // space, refined; it replaces the winner when it passes and scores more than `score` by
-// rival_margin. A pipe that carries on into space the sensor saw through is wrong however well
-// its seen part fits.
+// rival_margin (a slide by a turn, as the winner's turns, by turn_margin). A pipe that carries on
+// into space the sensor saw through is wrong however well its seen part fits.
 template <typename Passes, typename Taken>
 std::optional<Moved> best_slide(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, double overlap,
                                 double score, const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space,
@@ -1407,8 +1407,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   };
   // How a winning pose of model m is slid: along a pipe's axis, or (with bend_slides) by the
   // model's own slide (an elbow about its bend); or not at all.
+  const auto along = [](const detail::ModelCylinder& c) { return detail::shift_along(c.point, c.direction, c.end - c.start); };
   const auto winner_slide = [&](size_t m) -> std::optional<detail::Slide> {
-    if (const auto* c = library.cylinder(m)) return detail::shift_along(c->point, c->direction, c->end - c->start);
+    if (const auto* c = library.cylinder(m)) return along(*c);
     if (const auto* slide = library.slide(m); slide && params.bend_slides) return *slide;
     return std::nullopt;
   };
@@ -1418,7 +1419,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     if (auto slide = winner_slide(m)) return slide;
     const auto& parts = library.round_parts(m);
     if (!params.round_part_hypotheses || parts.empty()) return std::nullopt;
-    return detail::shift_along(parts.front().point, parts.front().direction, parts.front().end - parts.front().start);
+    return along(parts.front());
   };
   // The best starting poses are refined by the coarse ICP; in score order, the first that passes
   // the fine ICP and the visibility tests wins.

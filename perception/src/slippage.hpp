@@ -42,8 +42,5 @@ Slide shift_along(const Eigen::Vector3d& point, const Eigen::Vector3d& direction
 /// The first that is none is returned as a turn about its screw axis (its pitch dropped), or as
 /// a shift when it turns the points by less than a twentieth of how far it shifts them.
 std::optional<Slide> slide_along_itself(const PointCloud& model, double res, double max_ratio = 0.1);
-inline bool slides_along_itself(const PointCloud& model, double res, double max_ratio = 0.1) {
-  return slide_along_itself(model, res, max_ratio).has_value();
-}
 
 }  // namespace artisan::detail

@@ -18,7 +18,7 @@ namespace {
 
 constexpr double kRes = 0.003;
 
-bool slides(const TriangleMesh& mesh) { return detail::slides_along_itself(sample_surface(mesh, kRes), kRes); }
+bool slides(const TriangleMesh& mesh) { return detail::slide_along_itself(sample_surface(mesh, kRes), kRes).has_value(); }
 
 TEST(Slippage, APipeAndAnElbowSlideAlongThemselves) {
   EXPECT_TRUE(slides(sim::make_pipe(0.35)));
@@ -70,10 +70,10 @@ TEST(Slippage, PartsHeldByTheirShapeOrTurningOntoThemselvesDoNot) {
 }
 
 TEST(Slippage, NothingToSlideWithoutPointsOrNormals) {
-  EXPECT_FALSE(detail::slides_along_itself(PointCloud{}, kRes));
+  EXPECT_FALSE(detail::slide_along_itself(PointCloud{}, kRes));
   PointCloud no_normals = sample_surface(sim::make_pipe(0.35), kRes);
   no_normals.normals.clear();
-  EXPECT_FALSE(detail::slides_along_itself(no_normals, kRes));
+  EXPECT_FALSE(detail::slide_along_itself(no_normals, kRes));
 }
 
 }  // namespace

@@ -92,7 +92,8 @@ class SpinImageLibrary {
   /// Model m's round parts (ModelLibraryParams::round_part_min_share), largest first (made by compress()).
   const std::vector<detail::ModelCylinder>& round_parts(size_t m) const { return *models_[m].round_parts; }
   /// Whether model m's surface slides along itself by a motion that is no symmetry of it (a pipe
-  /// along its axis, an elbow about its bend: detail::slide_along_itself; made by compress()).
+  /// along its axis, an elbow about its bend: detail::slide_along_itself; made by compress(),
+  /// true before).
   bool slides(size_t m) const { return !models_[m].turns || models_[m].slide; }
   /// That motion, or null (none, or not made yet).
   const detail::Slide* slide(size_t m) const { return models_[m].slide.get(); }
