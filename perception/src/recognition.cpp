@@ -964,42 +964,56 @@ std::optional<Moved> slid_along(const PointCloud& model, const detail::Slide& sl
   return best;
 }
 
-// A winning pose of a model that slides along itself (a straight pipe, an elbow) slid by every
-// axis step up to half its extent along the slide either way, where the whole seen part could lie
-// (when both a pipe's ends are hidden, the ICP and the tests leave its place along the run open):
-// of the slides that put about as much of the model on the scene (the fine ICP's figures at the
-// slid pose, less rival_coarse_slack), the one with the most on the scene less its share in free
-// space, refined; it replaces the winner when it passes and scores more than `score` by
-// rival_margin (a slide by a turn, as the winner's turns, by turn_margin). A pipe that carries on
-// into space the sensor saw through is wrong however well its seen part fits.
+// A pose of a model that slides along itself (a straight pipe, an elbow) slid by every axis step
+// up to half its extent along the slide either way, where the whole seen part could lie (when both
+// a pipe's ends are hidden, the ICP and the tests leave its place along the run open): each with
+// how far it was slid, its share of the model on the scene at the slid pose (the fine ICP's
+// figures there), and that less its share in free space (-infinity when the share on the scene is
+// below `min_overlap`).
+struct Slid {
+  Transform T;
+  double shift = 0;     ///< [m] along the slide
+  double overlap = 0;   ///< [1]
+  double score = -std::numeric_limits<double>::infinity();
+};
+std::vector<Slid> slides_of(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, double min_overlap,
+                            const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine,
+                            const RecognitionParams& params, double res) {
+  const double step = params.axis_step_factor * res;
+  const auto steps = static_cast<int>(0.5 * slide.extent / step);
+  if (steps < 1) return {};
+  IcpSettings at_pose = fine;
+  at_pose.max_iterations = 1;  // its overlap is that of the pose it starts from
+  std::vector<Slid> slides(2 * static_cast<size_t>(steps));
+#pragma omp parallel for schedule(dynamic, 4)
+  for (size_t k = 0; k < slides.size(); ++k) {
+    Slid& slid = slides[k];
+    slid.shift = (k % 2 ? -1 : 1) * static_cast<double>(k / 2 + 1) * step;
+    slid.T = T_scene_model * slide.by(slid.shift);
+    slid.overlap = icp_point_to_plane(model, scene, scene_tree, slid.T, at_pose).overlap_fraction;
+    if (slid.overlap < min_overlap) continue;
+    // Its share in free space alone: the seen surface carried on past it is not measured.
+    slid.score = slid.overlap - free_space.check(model, slid.T, [](const FreeSpace::Check&) { return false; }).free_space;
+  }
+  return slides;
+}
+
+// A winning pose of a model that slides along itself, slid (slides_of): of the slides that put
+// about as much of the model on the scene (less rival_coarse_slack), the one with the most on the
+// scene less its share in free space, refined; it replaces the winner when it passes and scores
+// more than `score` by rival_margin (a slide by a turn, as the winner's turns, by turn_margin). A
+// pipe that carries on into space the sensor saw through is wrong however well its seen part fits.
 template <typename Passes, typename Taken>
 std::optional<Moved> best_slide(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, double overlap,
                                 double score, const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space,
                                 const IcpSettings& fine, const RecognitionParams& params, double res, const Passes& passes, const Taken& taken) {
-  const double step = params.axis_step_factor * res;
-  const auto steps = static_cast<int>(0.5 * slide.extent / step);
-  if (!params.winner_slides || steps < 1) return std::nullopt;
-  IcpSettings at_pose = fine;
-  at_pose.max_iterations = 1;  // its overlap is that of the pose it starts from
-  struct Slid {
-    Transform T;
-    double score = -std::numeric_limits<double>::infinity();
-  };
-  std::vector<Slid> slides(2 * static_cast<size_t>(steps));
-#pragma omp parallel for schedule(dynamic, 4)
-  for (size_t k = 0; k < slides.size(); ++k) {
-    const int shift = (k % 2 ? -1 : 1) * static_cast<int>(k / 2 + 1);
-    Slid& slid = slides[k];
-    slid.T = T_scene_model * slide.by(shift * step);
-    const double on_scene = icp_point_to_plane(model, scene, scene_tree, slid.T, at_pose).overlap_fraction;
-    if (on_scene < overlap - params.rival_coarse_slack) continue;
-    // Its share in free space alone: the seen surface carried on past it is not measured.
-    slid.score = on_scene - free_space.check(model, slid.T, [](const FreeSpace::Check&) { return false; }).free_space;
-  }
+  if (!params.winner_slides) return std::nullopt;
+  const auto slides = slides_of(model, slide, T_scene_model, overlap - params.rival_coarse_slack, scene, scene_tree, free_space, fine, params, res);
+  if (slides.empty()) return std::nullopt;
   const auto best = std::max_element(slides.begin(), slides.end(), [](const Slid& a, const Slid& b) { return a.score < b.score; });
   // A slide by a turn (an elbow about its bend) is held to the margin of the winner's turns.
   const double margin = slide.radius > 0 ? params.turn_margin : params.rival_margin;
-  if (!(best->score > score + margin)) return std::nullopt;  // steps >= 1: there are slides
+  if (!(best->score > score + margin)) return std::nullopt;
   Moved moved = refined_from(model, best->T, scene, scene_tree, free_space, fine, params, res, passes);
   if (!moved.passed || !(moved.icp.overlap_fraction - moved.seen.free_space > score + margin) || taken(moved.icp.T_target_source))
     return std::nullopt;
@@ -1706,6 +1720,27 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       for (size_t k = 0; k < rivals.size() && k < 3 && !found.ambiguous; ++k) {
         const Transform& T = rivals[k]->T_target_source;
         if (passes_of(next->m)(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model, T)) ambiguous_with(next->m, T);
+      }
+    }
+    // Ambiguous, failing that: the model slid along itself (a pipe along its run, an elbow about
+    // its bend) by more than a tenth of its diameter puts nearly as much of it on the scene, less
+    // its share in free space (ambiguity_margin), and passes the tests there, refined: where both
+    // of a pipe's ends are hidden, nothing the sensor saw places it along the run. Of the first
+    // three such slides, farthest first, the first that passes: how far its place is open.
+    if (const auto slide = winner_slide(next->m); slide && !found.ambiguous) {
+      const PointCloud& found_model = library.model_points(next->m);
+      const double diameter = next->same->diameter();
+      const double least = (1 - params.ambiguity_margin) * (top.icp.overlap_fraction - top.seen->free_space);
+      auto slides = slides_of(found_model, *slide, top.T, (1 - params.ambiguity_margin) * top.icp.overlap_fraction, scene_points, scene_tree,
+                              free_space, fine, params, res);
+      std::erase_if(slides, [&](const Slid& slid) { return slid.score < least || next->same->centre_distance(top.T, slid.T) < 0.1 * diameter; });
+      std::stable_sort(slides.begin(), slides.end(), [](const Slid& a, const Slid& b) { return std::abs(a.shift) > std::abs(b.shift); });
+      for (size_t k = 0; k < slides.size() && k < 3 && !found.ambiguous; ++k) {
+        const Moved moved = refined_from(found_model, slides[k].T, scene_points, scene_tree, free_space, fine, params, res, passes_of(next->m));
+        const Transform& T = moved.icp.T_target_source;
+        if (moved.passed && moved.icp.overlap_fraction - moved.seen.free_space >= least && next->same->centre_distance(top.T, T) >= 0.1 * diameter &&
+            !on_accepted(found_model, T))
+          ambiguous_with(next->m, T);
       }
     }
     result.instances.push_back(found);

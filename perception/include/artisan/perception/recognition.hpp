@@ -230,7 +230,9 @@ struct RecognitionParams {
   /// [1] a different pose at the same place (RecognizedInstance::ambiguous) that puts at least
   /// 1 - ambiguity_margin of the found one's share of the model on the scene, and passes the
   /// tests, is an ambiguity; so is another model's pose that passes the tests and explains at
-  /// least 1 - ambiguity_margin of the scene surface the found one newly explains
+  /// least 1 - ambiguity_margin of the scene surface the found one newly explains; and so is the
+  /// model slid along itself that keeps 1 - ambiguity_margin of the found one's share on the
+  /// scene, and of that share less its share in free space, and passes the tests
   double ambiguity_margin = 0.1;
   /// Where the sensors that saw the scene were, in the scene frame (one view for a single scan,
   /// one per merged scan). With views, a pose is refused when more than
@@ -389,7 +391,10 @@ struct RecognizedInstance {
   /// diameter from it; a turn about the part's own symmetry, a flange's about its axis, is the same
   /// surface) fits the scene almost as well (ambiguity_margin) and passes the visibility tests: a
   /// coarse pose of the search at the same place, or a turn about one of its turn axes (a valve
-  /// whose stem and hand wheel are hidden).
+  /// whose stem and hand wheel are hidden); or, failing that, the model slid along itself (a pipe
+  /// along its run, an elbow about its bend) by more than a tenth of its diameter fits almost as
+  /// well, less its share in free space, and passes the tests (a pipe whose ends are hidden: the
+  /// farthest such slide that passes, so the alternative shows how far its place is open).
   bool ambiguous = false;
   std::string alternative_model;                                ///< the alternative's model, when ambiguous (`model` for another pose of it)
   size_t alternative_model_index = 0;                           ///< its index in the library
