@@ -1020,6 +1020,42 @@ std::optional<Moved> best_slide(const PointCloud& model, const detail::Slide& sl
   return moved;
 }
 
+// An accepted pose of a model that slides along itself, slid by every third of a resolution up to
+// axis_step_factor resolutions either way (the pose itself among them), each measured where it is
+// (a one-iteration ICP's figures at its start): of those that pass, the one the sensor's evidence
+// is least against and most for (its share on the scene, less its shares in seen free space, not
+// seen where it should have been, and carried on past its outline), or none when that is the pose
+// itself. The ICP leaves such a pose where it came to rest along the slide, which only the rims
+// decide: a pipe short of its seen end leaves the scene carrying on past its outline, one past it
+// puts its end where the sensor saw through or saw nothing.
+template <typename Passes>
+std::optional<Moved> evidence_slide(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, const PointCloud& scene,
+                                    const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params,
+                                    double res, const Passes& passes) {
+  const auto steps = static_cast<int>(std::lround(3 * params.axis_step_factor));
+  if (!params.evidence_slides || steps < 1) return std::nullopt;
+  IcpSettings at_pose = fine;
+  at_pose.max_iterations = 1;
+  std::vector<Moved> slid(2 * static_cast<size_t>(steps) + 1);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (size_t k = 0; k < slid.size(); ++k) {
+    const Transform T = T_scene_model * slide.by((static_cast<double>(k) - steps) * res / 3);
+    Moved& m = slid[k];
+    m.icp = icp_point_to_plane(model, scene, scene_tree, T, at_pose);
+    m.icp.T_target_source = T;  // its figures are those of the pose it started from
+    m.seen = free_space.check(model, T);
+    m.checked = true;
+    m.passed = passes(m.icp, m.seen);
+  }
+  const auto evidence = [](const Moved& m) { return m.icp.overlap_fraction - m.seen.free_space - (1 - m.seen.explained) - m.seen.continued; };
+  const Moved* best = nullptr;
+  for (const auto& m : slid)
+    if (m.passed && (!best || evidence(m) > evidence(*best))) best = &m;
+  const Moved& itself = slid[static_cast<size_t>(steps)];
+  if (!best || best == &itself || (itself.passed && !(evidence(*best) > evidence(itself) + params.rival_margin))) return std::nullopt;
+  return *best;
+}
+
 }  // namespace
 
 struct SpinImageLibrary::SearchIndex {
@@ -1669,7 +1705,14 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     record(*next, true);
     auto& verified = next->verified;
     if (*next->winner != 0) std::swap(verified[*next->winner], verified.front());
-    const auto& top = verified.front();
+    auto& top = verified.front();
+    if (const auto slide = winner_slide(next->m)) {
+      const PointCloud& model = library.model_points(next->m);
+      if (const auto slid = evidence_slide(model, *slide, top.T, scene_points, scene_tree, free_space, fine, params, res, passes_of(next->m))) {
+        top.move_to(*slid);
+        next->gain = newly_explained(model, top.T);
+      }
+    }
     RecognizedInstance found;
     found.model = library.model_name(next->m);
     found.model_index = next->m;

@@ -345,6 +345,13 @@ struct RecognitionParams {
   /// (at rival_margin two held-out elbows were lost to slides scoring 0.006 more). Clutter bench,
   /// scenes 0-699: 8 parts more and 4 false positives fewer, in 9 scenes changed, 8 for the better.
   bool bend_slides = true;
+  /// An accepted pose of a model that slides along itself (a pipe, an elbow) is set along its
+  /// slide, within axis_step_factor resolutions either way by steps of a third of one, where the
+  /// sensor's evidence is least against it and most for it (its share on the scene, less its
+  /// shares in seen free space, not seen where it should have been, and of its explained surface
+  /// the scene carries on past its outline), among the poses that pass: the ICP does not hold it
+  /// along the slide, where only its rims say where it ends.
+  bool evidence_slides = true;
   double rival_coarse_slack = 0.01;  ///< [1]
   /// [1] 0.003 also took a tee's true pose back from one turned 180 degrees (scene 6), but lost
   /// a pipe to one slid 38 mm along its axis (scene 22)
