@@ -967,13 +967,12 @@ std::optional<Moved> slid_along(const PointCloud& model, const detail::Slide& sl
 // A pose of a model that slides along itself (a straight pipe, an elbow) slid by every axis step
 // up to half its extent along the slide either way, where the whole seen part could lie (when both
 // a pipe's ends are hidden, the ICP and the tests leave its place along the run open): each with
-// how far it was slid, its share of the model on the scene at the slid pose (the fine ICP's
-// figures there), and that less its share in free space (-infinity when the share on the scene is
-// below `min_overlap`).
+// how far it was slid and its score, its share of the model on the scene at the slid pose (the
+// fine ICP's figures there) less its share in free space (-infinity when the share on the scene
+// is below `min_overlap`).
 struct Slid {
   Transform T;
-  double shift = 0;     ///< [m] along the slide
-  double overlap = 0;   ///< [1]
+  double shift = 0;  ///< [m] along the slide
   double score = -std::numeric_limits<double>::infinity();
 };
 std::vector<Slid> slides_of(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, double min_overlap,
@@ -990,10 +989,10 @@ std::vector<Slid> slides_of(const PointCloud& model, const detail::Slide& slide,
     Slid& slid = slides[k];
     slid.shift = (k % 2 ? -1 : 1) * static_cast<double>(k / 2 + 1) * step;
     slid.T = T_scene_model * slide.by(slid.shift);
-    slid.overlap = icp_point_to_plane(model, scene, scene_tree, slid.T, at_pose).overlap_fraction;
-    if (slid.overlap < min_overlap) continue;
+    const double on_scene = icp_point_to_plane(model, scene, scene_tree, slid.T, at_pose).overlap_fraction;
+    if (on_scene < min_overlap) continue;
     // Its share in free space alone: the seen surface carried on past it is not measured.
-    slid.score = slid.overlap - free_space.check(model, slid.T, [](const FreeSpace::Check&) { return false; }).free_space;
+    slid.score = on_scene - free_space.check(model, slid.T, [](const FreeSpace::Check&) { return false; }).free_space;
   }
   return slides;
 }
@@ -1024,10 +1023,12 @@ std::optional<Moved> best_slide(const PointCloud& model, const detail::Slide& sl
 // axis_step_factor resolutions either way (the pose itself among them), each measured where it is
 // (a one-iteration ICP's figures at its start): of those that pass, the one the sensor's evidence
 // is least against and most for (its share on the scene, less its shares in seen free space, not
-// seen where it should have been, and carried on past its outline), or none when that is the pose
-// itself. The ICP leaves such a pose where it came to rest along the slide, which only the rims
-// decide: a pipe short of its seen end leaves the scene carrying on past its outline, one past it
-// puts its end where the sensor saw through or saw nothing.
+// seen where it should have been, and carried on past its outline) when it beats the pose itself
+// by rival_margin (or the pose itself, measured so, does not pass), else none: near the right
+// place the evidence is flat, and a slide within it would only move the pose by chance. The ICP
+// leaves such a pose where it came to rest along the slide, which only the rims decide: a pipe
+// short of its seen end leaves the scene carrying on past its outline, one past it puts its end
+// where the sensor saw through or saw nothing.
 template <typename Passes>
 std::optional<Moved> evidence_slide(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, const PointCloud& scene,
                                     const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params,
