@@ -1707,11 +1707,12 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     auto& verified = next->verified;
     if (*next->winner != 0) std::swap(verified[*next->winner], verified.front());
     auto& top = verified.front();
-    if (const auto slide = winner_slide(next->m)) {
-      const PointCloud& model = library.model_points(next->m);
-      if (const auto slid = evidence_slide(model, *slide, top.T, scene_points, scene_tree, free_space, fine, params, res, passes_of(next->m))) {
+    const PointCloud& found_model = library.model_points(next->m);
+    const auto slide = winner_slide(next->m);
+    if (slide) {
+      if (const auto slid = evidence_slide(found_model, *slide, top.T, scene_points, scene_tree, free_space, fine, params, res, passes_of(next->m))) {
         top.move_to(*slid);
-        next->gain = newly_explained(model, top.T);
+        next->gain = newly_explained(found_model, top.T);
       }
     }
     RecognizedInstance found;
@@ -1751,7 +1752,6 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // elsewhere (not a turn about the part's own symmetry) puts nearly as much of the model on the
     // scene (coarse ICP overlap) and passes the tests too; the best of the first three such.
     if (!found.ambiguous) {
-      const PointCloud& found_model = library.model_points(next->m);
       const double overlap = icp_point_to_plane(found_model, scene_points, scene_tree, top.T, coarse).overlap_fraction;
       std::vector<const IcpResult*> rivals;
       for (const auto& other : next->coarse_poses) {
@@ -1771,8 +1771,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // its share in free space (ambiguity_margin), and passes the tests there, refined: where both
     // of a pipe's ends are hidden, nothing the sensor saw places it along the run. Of the first
     // three such slides, farthest first, the first that passes: how far its place is open.
-    if (const auto slide = winner_slide(next->m); slide && !found.ambiguous) {
-      const PointCloud& found_model = library.model_points(next->m);
+    if (slide && !found.ambiguous) {
       const double diameter = next->same->diameter();
       const double least = (1 - params.ambiguity_margin) * (top.icp.overlap_fraction - top.seen->free_space);
       auto slides = slides_of(found_model, *slide, top.T, (1 - params.ambiguity_margin) * top.icp.overlap_fraction, scene_points, scene_tree,
