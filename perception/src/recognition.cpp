@@ -23,8 +23,8 @@
 #include "artisan/perception/icp.hpp"
 #include "artisan/perception/kdtree.hpp"
 #include "axis_proposals.hpp"
+#include "bin_depths.hpp"
 #include "correspondence_grouping.hpp"
-#include "open_table.hpp"
 #include "point_pair_voting.hpp"
 #include "slippage.hpp"
 
@@ -77,27 +77,6 @@ Plane largest_plane(const PointCloud& cloud, const std::vector<char>& taken, dou
   return best;
 }
 
-// The nearest depth seen in each bin of a view's projection (a bin packed into one key). The
-// free-space test looks up a dozen bins per model point and check, millions per scene.
-class BinDepths {
- public:
-  /// Empty, with room for `entries` bins.
-  void reset(size_t entries) { table_.reset(entries); }
-  /// The bin's depth becomes the smaller of its own and `depth`.
-  void keep_min(int64_t key, double depth) {
-    const auto [kept, inserted] = table_.insert(static_cast<uint64_t>(key), depth);
-    if (!inserted && depth < *kept) *kept = depth;
-  }
-  /// The bin's depth, infinite when nothing was seen there.
-  double at(int64_t key) const {
-    const double* depth = table_.find(static_cast<uint64_t>(key));
-    return depth ? *depth : std::numeric_limits<double>::infinity();
-  }
-
- private:
-  detail::OpenTable<double> table_;
-};
-
 // What each sensor saw of the scene, for the free-space test: per view, the nearest scene depth
 // in each bin of a projection (gnomonic about the view's main direction for perspective rays, an
 // orthographic grid for parallel rays).
@@ -131,9 +110,11 @@ class FreeSpace {
       }
       // Bins about 1.5 resolutions wide at the scene's median depth.
       m.bin = view.rays == SensorView::Rays::kPerspective ? 1.5 * resolution_m / median : 1.5 * resolution_m;
-      m.nearest.reset(scene.points.size());
+      std::vector<detail::BinDepths::Binned> binned;
       for (const auto& p : scene.points)
-        if (const auto key = m.key(p.cast<double>())) m.nearest.keep_min(Map::pack(key->u, key->v), key->depth);
+        if (const auto key = m.key(p.cast<double>())) binned.push_back({key->u, key->v, key->depth});
+      m.nearest.assign(binned);
+      m.around.assign(binned, 1);
       maps_.push_back(std::move(m));
     }
   }
@@ -217,26 +198,26 @@ class FreeSpace {
       return near[i] == 1;
     };
     std::vector<char> counted(p.size(), 0), violates(p.size(), 0), expected(p.size(), 0), seen_there(p.size(), 0), hidden(p.size(), 0);
-    BinDepths self;  // the model's own nearest depth per bin
+    detail::BinDepths self;  // the model's own nearest depth per bin
+    std::vector<detail::BinDepths::Binned> faces_view;  // the model points facing the view, binned
     std::vector<std::optional<Key>> keys(p.size());
     for (const auto& m : maps_) {
-      self.reset(p.size());
 #pragma omp parallel for schedule(static)
       for (size_t i = 0; i < p.size(); ++i) keys[i] = m.key(p[i]);
-      for (size_t i = 0; i < p.size(); ++i) {
-        if (!keys[i] || n[i].dot(m.toward(p[i])) <= 0) continue;
-        self.keep_min(Map::pack(keys[i]->u, keys[i]->v), keys[i]->depth);
-      }
+      faces_view.clear();
+      for (size_t i = 0; i < p.size(); ++i)
+        if (keys[i] && n[i].dot(m.toward(p[i])) > 0) faces_view.push_back({keys[i]->u, keys[i]->v, keys[i]->depth});
+      self.assign(faces_view);
       // Each point's own entries only: the points are independent.
 #pragma omp parallel for schedule(dynamic, 256)
       for (size_t i = 0; i < p.size(); ++i) {
         if (!keys[i]) continue;
         const double incidence_cos = n[i].dot(m.toward(p[i]).normalized());
         if (incidence_cos <= min_incidence_cos_) continue;
-        const double seen = m.nearest_around(*keys[i]);
+        const Key& k = *keys[i];
+        const double seen = m.around.at(k.u, k.v);
         if (!std::isfinite(seen)) continue;  // the sensor saw nothing there: no evidence either way
-        const int64_t bin = Map::pack(keys[i]->u, keys[i]->v);
-        const bool returned = !own_bin_only_ || incidence_cos > grazing_cos_ || std::isfinite(m.nearest.at(bin));
+        const bool returned = !own_bin_only_ || incidence_cos > grazing_cos_ || std::isfinite(m.nearest.at(k.u, k.v));
         if (returned) {
           counted[i] = 1;
           if (keys[i]->depth < seen - tolerance_) violates[i] = 1;
@@ -245,7 +226,7 @@ class FreeSpace {
         // scans' real ray directions are not recorded): what it should have seen is not predicted.
         // Where its ray returned nothing (own_bin_only) a point is expected only when the scene
         // hides it.
-        if (m.view.rays == SensorView::Rays::kPerspective && keys[i]->depth <= self.at(bin) + tolerance_) {
+        if (m.view.rays == SensorView::Rays::kPerspective && k.depth <= self.at(k.u, k.v) + tolerance_) {
           const bool there = near_scene(i), behind = !there && m.seen_at(*keys[i]) < keys[i]->depth - tolerance_;
           if (!returned && !behind) continue;
           expected[i] = 1;
@@ -438,26 +419,18 @@ class FreeSpace {
     SensorView view;
     Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  ///< rows: local x, y, z (z along the view)
     double bin = 1.0;
-    BinDepths nearest;
-    static int64_t pack(int64_t u, int64_t v) { return static_cast<int64_t>((static_cast<uint64_t>(u) << 32) ^ (static_cast<uint64_t>(v) & 0xffffffffu)); }
+    detail::BinDepths nearest;  ///< the nearest scene depth per bin
+    detail::BinDepths around;   ///< the nearest in the 3 x 3 bins about each bin (the bins are small)
     Eigen::Vector3d local(const Eigen::Vector3d& p) const {
       return view.rays == SensorView::Rays::kPerspective ? Eigen::Vector3d(R * (p - view.origin_mesh)) : Eigen::Vector3d(R * p);
     }
     Eigen::Vector3d toward(const Eigen::Vector3d& p) const {
       return view.rays == SensorView::Rays::kPerspective ? Eigen::Vector3d(view.origin_mesh - p) : view.toward_sensor_mesh;
     }
-    /// The nearest seen depth around a bin (3 x 3: the bins are small); infinity when none.
-    double nearest_around(const Key& k) const {
-      double seen = std::numeric_limits<double>::infinity();
-      for (int du = -1; du <= 1; ++du)
-        for (int dv = -1; dv <= 1; ++dv)
-          seen = std::min(seen, nearest.at(pack(k.u + du, k.v + dv)));
-      return seen;
-    }
     /// The seen depth in the point's own bin, else the nearest around it.
     double seen_at(const Key& k) const {
-      const double own = nearest.at(pack(k.u, k.v));
-      return std::isfinite(own) ? own : nearest_around(k);
+      const double own = nearest.at(k.u, k.v);
+      return std::isfinite(own) ? own : around.at(k.u, k.v);
     }
     std::optional<Key> key(const Eigen::Vector3d& p) const {
       const Eigen::Vector3d q = local(p);
@@ -1506,6 +1479,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         const bool same = std::any_of(s.verified.begin(), s.verified.end(), [&](const Verified& d) { return (*s.same)(v.T, d.T, 2 * res); });
         if (same) v.origin->done = true;
         else s.verified.push_back(std::move(v));
+        if (getenv("ARTISAN_COUNT")) fprintf(stderr, "COUNT batch %d same %d\n", 1, same ? 1 : 0);
       }
       size_t refined = 0;
       for (size_t k = first; k < s.verified.size() && refined < static_cast<size_t>(std::max(params.max_candidates_verified, 0)); ++k) {
