@@ -261,17 +261,23 @@ Symmetries symmetries_of(const TriangleMesh& mesh) {
       if (onto_itself(refined, 0.0005f, 0.9f, 1)) found.push_back(refined);
     }
   }
-  // Products of two, told apart by their quaternions to a thousandth (about a tenth of a degree)
-  // and where they put the centroid to a tenth of a millimetre.
+  // Products of two, one of each that turns within a fifth of a degree of another and puts the
+  // centroid within a tenth of a millimetre of it (the products of whole degrees land on rounded
+  // keys' boundaries: a key alone counted some turns twice). Those whose quaternion and centroid
+  // round to the same thousandth and tenth of a millimetre as one kept are dropped at once.
   std::vector<Transform> group;
   std::set<std::array<long, 7>> seen;
+  const double same_cos = std::cos(0.2 * std::numbers::pi / 180 / 2);  // |q1.q2| at a fifth of a degree
   const auto add = [&](const Transform& S) {
     Eigen::Quaterniond q(S.linear());
     if (q.w() < 0) q.coeffs() *= -1;
     const Eigen::Vector3d at = S * c;
     const std::array<long, 7> key = {std::lround(q.w() * 1e3), std::lround(q.x() * 1e3), std::lround(q.y() * 1e3), std::lround(q.z() * 1e3),
                                      std::lround(at.x() * 1e4), std::lround(at.y() * 1e4), std::lround(at.z() * 1e4)};
-    if (seen.insert(key).second) group.push_back(S);
+    if (!seen.insert(key).second) return;
+    for (const auto& G : group)
+      if (std::abs(Eigen::Quaterniond(G.linear()).dot(q)) > same_cos && (G * c - at).norm() < 1e-4) return;
+    group.push_back(S);
   };
   add(Transform::Identity());
   for (const auto& S : found) add(S);
