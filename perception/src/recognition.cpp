@@ -220,14 +220,14 @@ class FreeSpace {
         const bool returned = !own_bin_only_ || incidence_cos > grazing_cos_ || std::isfinite(m.nearest.at(k.u, k.v));
         if (returned) {
           counted[i] = 1;
-          if (keys[i]->depth < seen - tolerance_) violates[i] = 1;
+          if (k.depth < seen - tolerance_) violates[i] = 1;
         }
         // Parallel rays are only an approximation of a linear scanner's (the Stanford Cyberware
         // scans' real ray directions are not recorded): what it should have seen is not predicted.
         // Where its ray returned nothing (own_bin_only) a point is expected only when the scene
         // hides it.
         if (m.view.rays == SensorView::Rays::kPerspective && k.depth <= self.at(k.u, k.v) + tolerance_) {
-          const bool there = near_scene(i), behind = !there && m.seen_at(*keys[i]) < keys[i]->depth - tolerance_;
+          const bool there = near_scene(i), behind = !there && m.seen_at(k) < k.depth - tolerance_;
           if (!returned && !behind) continue;
           expected[i] = 1;
           if (there) seen_there[i] = 1;
@@ -1479,7 +1479,6 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         const bool same = std::any_of(s.verified.begin(), s.verified.end(), [&](const Verified& d) { return (*s.same)(v.T, d.T, 2 * res); });
         if (same) v.origin->done = true;
         else s.verified.push_back(std::move(v));
-        if (getenv("ARTISAN_COUNT")) fprintf(stderr, "COUNT batch %d same %d\n", 1, same ? 1 : 0);
       }
       size_t refined = 0;
       for (size_t k = first; k < s.verified.size() && refined < static_cast<size_t>(std::max(params.max_candidates_verified, 0)); ++k) {
