@@ -868,6 +868,17 @@ Moved refined_from(const PointCloud& model, const Transform& T_scene_model, cons
   return m;
 }
 
+// The fine ICP's figures of the model where T_scene_model puts it, not moved: its first
+// iteration's correspondences (share on the scene, residual), its pose T_scene_model itself.
+IcpResult figures_at(const PointCloud& model, const Transform& T_scene_model, const PointCloud& scene, const KdTree3& scene_tree,
+                     const IcpSettings& fine) {
+  IcpSettings at_pose = fine;
+  at_pose.max_iterations = 1;
+  IcpResult icp = icp_point_to_plane(model, scene, scene_tree, T_scene_model, at_pose);
+  icp.T_target_source = T_scene_model;
+  return icp;
+}
+
 // A pose of the model turned from T_scene_model about one of its turn axes (RecognitionParams::
 // turn_steps) that passes every test (`passes`, and not on an accepted instance: `taken`) and
 // scores more than `score` (T_scene_model's own: the model's share on the scene, less its share
@@ -954,15 +965,13 @@ std::vector<Slid> slides_of(const PointCloud& model, const detail::Slide& slide,
   const double step = params.axis_step_factor * res;
   const auto steps = static_cast<int>(0.5 * slide.extent / step);
   if (steps < 1) return {};
-  IcpSettings at_pose = fine;
-  at_pose.max_iterations = 1;  // its overlap is that of the pose it starts from
   std::vector<Slid> slides(2 * static_cast<size_t>(steps));
 #pragma omp parallel for schedule(dynamic, 4)
   for (size_t k = 0; k < slides.size(); ++k) {
     Slid& slid = slides[k];
     slid.shift = (k % 2 ? -1 : 1) * static_cast<double>(k / 2 + 1) * step;
     slid.T = T_scene_model * slide.by(slid.shift);
-    const double on_scene = icp_point_to_plane(model, scene, scene_tree, slid.T, at_pose).overlap_fraction;
+    const double on_scene = figures_at(model, slid.T, scene, scene_tree, fine).overlap_fraction;
     if (on_scene < min_overlap) continue;
     // Its share in free space alone: the seen surface carried on past it is not measured.
     slid.score = on_scene - free_space.check(model, slid.T, [](const FreeSpace::Check&) { return false; }).free_space;
@@ -1008,15 +1017,12 @@ std::optional<Moved> evidence_slide(const PointCloud& model, const detail::Slide
                                     double res, const Passes& passes) {
   const auto steps = static_cast<int>(std::lround(3 * params.axis_step_factor));
   if (!params.evidence_slides || steps < 1) return std::nullopt;
-  IcpSettings at_pose = fine;
-  at_pose.max_iterations = 1;
   std::vector<Moved> slid(2 * static_cast<size_t>(steps) + 1);
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t k = 0; k < slid.size(); ++k) {
     const Transform T = T_scene_model * slide.by((static_cast<double>(k) - steps) * res / 3);
     Moved& m = slid[k];
-    m.icp = icp_point_to_plane(model, scene, scene_tree, T, at_pose);
-    m.icp.T_target_source = T;  // its figures are those of the pose it started from
+    m.icp = figures_at(model, T, scene, scene_tree, fine);
     m.seen = free_space.check(model, T);
     m.checked = true;
     m.passed = passes(m.icp, m.seen);
@@ -1816,10 +1822,9 @@ RecognitionCandidate check_pose(const TriangleMesh& scene, SpinImageLibrary& lib
   const KdTree3 scene_tree(scene_points.points, static_cast<float>(2.0 * res));
   const FreeSpace free_space = scene_free_space(scene_points, scene_tree, library, params);
   const PointCloud& model = library.model_points(model_index);
-  IcpSettings settings = fine_icp(res);
-  if (!refine) settings.max_iterations = 1;  // its figures are those of the pose it starts from
-  IcpResult icp = icp_point_to_plane(model, scene_points, scene_tree, T_scene_model, settings);
-  if (!refine) icp.T_target_source = T_scene_model;
+  const IcpSettings fine = fine_icp(res);
+  const IcpResult icp = refine ? icp_point_to_plane(model, scene_points, scene_tree, T_scene_model, fine)
+                               : figures_at(model, T_scene_model, scene_points, scene_tree, fine);
   const FreeSpace::Check seen = free_space.check(model, icp.T_target_source);
   RecognitionCandidate c = candidate_of(model_index, icp.T_target_source, icp, &seen);
   const bool passed = meets_tests(icp, seen, params, res, {}, library.slides(model_index));
