@@ -82,11 +82,16 @@ Plane largest_plane(const PointCloud& cloud, const std::vector<char>& taken, dou
 // orthographic grid for parallel rays).
 class FreeSpace {
  public:
+  /// A model's points and a k-d tree over them in its own frame (the library's).
+  struct ModelTree {
+    const PointCloud* points;
+    const KdTree3* tree;
+  };
   FreeSpace(const PointCloud& scene, const KdTree3& scene_tree, const std::vector<SensorView>& views, double resolution_m,
             double tolerance_m, double max_incidence_rad, size_t largest_model_points, size_t smallest_support, bool own_bin_only,
-            double own_bin_min_incidence_rad)
+            double own_bin_min_incidence_rad, std::vector<ModelTree> model_trees)
       : scene_(scene), tree_(scene_tree), resolution_(resolution_m), tolerance_(tolerance_m), min_incidence_cos_(std::cos(max_incidence_rad)),
-        own_bin_only_(own_bin_only), grazing_cos_(std::cos(own_bin_min_incidence_rad)) {
+        own_bin_only_(own_bin_only), grazing_cos_(std::cos(own_bin_min_incidence_rad)), model_trees_(std::move(model_trees)) {
     find_planes(largest_model_points, smallest_support);
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     for (const auto& p : scene.points) centroid += p.cast<double>();
@@ -260,13 +265,24 @@ class FreeSpace {
     // with a normal within 25 degrees of its own.
     if (!worth_it(c)) c.continued = std::numeric_limits<double>::quiet_NaN();
     else if (did) {
+      // Whether a scene point lies off the model (farther than 1.5 resolutions from all its
+      // points), asked of the model's own tree in its frame, and only for the scene points the
+      // tangent-plane test leaves: 0 not known yet, 1 on it, 2 off it. (Marking what lies on the
+      // model from each of its points first, most of them hidden, cost more.)
+      const auto own = std::find_if(model_trees_.begin(), model_trees_.end(), [&](const ModelTree& m) { return m.points == &model; });
+      if (own == model_trees_.end()) throw Error("free-space test: the model checked is not one of the library's");
       std::vector<char> on_model(scene_.points.size(), 0);
+      const Eigen::Isometry3f to_model = T.inverse().cast<float>();
+      const auto off_model = [&](size_t s) {
+        std::atomic_ref<char> state(on_model[s]);
+        char known = state.load(std::memory_order_relaxed);
+        if (!known) {
+          known = own->tree->nearest_within(to_model * scene_.points[s], static_cast<float>(1.5 * resolution_)) ? 1 : 2;
+          state.store(known, std::memory_order_relaxed);
+        }
+        return known == 2;
+      };
       std::vector<size_t> around;
-#pragma omp parallel for schedule(dynamic, 256) private(around)
-      for (size_t i = 0; i < p.size(); ++i) {
-        tree_.within(p[i].cast<float>(), static_cast<float>(1.5 * resolution_), around);
-        for (const size_t s : around) std::atomic_ref<char>(on_model[s]).store(1, std::memory_order_relaxed);
-      }
       size_t continued = 0;
 #pragma omp parallel for schedule(dynamic, 256) private(around) reduction(+ : continued)
       for (size_t i = 0; i < p.size(); ++i) {
@@ -274,7 +290,7 @@ class FreeSpace {
         const Eigen::Vector3f pi = p[i].cast<float>(), ni = n[i].cast<float>();
         tree_.within(pi, static_cast<float>(3.0 * resolution_), around);
         for (const size_t s : around)
-          if (!on_model[s] && std::abs(ni.dot(scene_.points[s] - pi)) <= static_cast<float>(0.5 * resolution_) && ni.dot(scene_.normals[s]) >= 0.9f) {
+          if (std::abs(ni.dot(scene_.points[s] - pi)) <= static_cast<float>(0.5 * resolution_) && ni.dot(scene_.normals[s]) >= 0.9f && off_model(s)) {
             ++continued;
             break;
           }
@@ -453,6 +469,7 @@ class FreeSpace {
   std::vector<char> support_;     ///< per scene point: on a background or a support plane
   std::vector<Solid> solids_;     ///< the faces of the background and support planes
   std::vector<Map> maps_;
+  std::vector<ModelTree> model_trees_;  ///< of every model that may be checked
 };
 
 // A pose hypothesis (a group's, a pair of matches', a vote cluster's), with its cheap score.
@@ -825,8 +842,11 @@ FreeSpace scene_free_space(const PointCloud& scene_points, const KdTree3& scene_
   }
   // Support planes are looked for only when they are used (else only the background planes).
   const size_t smallest_support = params.no_votes_on_support ? 2 * largest_planar_part : 0;
+  std::vector<FreeSpace::ModelTree> model_trees;
+  for (size_t m = 0; m < library.model_count(); ++m) model_trees.push_back({&library.model_points(m), &library.model_tree(m)});
   return FreeSpace(scene_points, scene_tree, params.views, res, params.free_space_tolerance_factor * res, params.max_incidence_deg * std::numbers::pi / 180,
-                   largest_model, smallest_support, params.free_space_own_bin, params.own_bin_min_incidence_deg * std::numbers::pi / 180);
+                   largest_model, smallest_support, params.free_space_own_bin, params.own_bin_min_incidence_deg * std::numbers::pi / 180,
+                   std::move(model_trees));
 }
 
 // The coarse ICP ranks starting poses, the fine one places and measures the few verified; on
@@ -1087,7 +1107,7 @@ void SpinImageLibrary::add_precomputed_model(const std::string& name, PointCloud
     throw Error("spin-image library: precomputed model \"" + name + "\" has " + std::to_string(images.rows()) + " x " +
                 std::to_string(images.cols()) + " spin images for " + std::to_string(points.points.size()) + " points; expected " +
                 std::to_string(bins()) + " rows");
-  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}, {}, {}, 0, {}});
+  models_.push_back({name, std::move(points), std::move(images), {}, {}, {}, {}, {}, {}, 0, {}});
   compressed_ = false;
 }
 
@@ -1116,6 +1136,8 @@ void SpinImageLibrary::compress() {
   for (auto& m : models_) {
     m.coefficients = project(m.images);
     if (!m.turns) {
+      // (Its grid answers the free-space test's queries of 1.5 resolutions.)
+      m.tree = std::make_shared<const KdTree3>(m.points.points, static_cast<float>(1.5 * params_.resolution_m));
       m.turns = std::make_shared<const detail::TurnAxes>(find_turn_axes(m.points));
       // The turn axis most of the model is a cylinder about, if any.
       for (size_t a = 0; a < 3; ++a) {

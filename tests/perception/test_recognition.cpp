@@ -121,6 +121,23 @@ TEST(Recognition, CompressedSearchAgreesWithTheFullSearch) {
   EXPECT_LT(d.translation().norm(), 0.001);
 }
 
+// The free-space test asks the model's own tree, in the model's frame, whether a scene point lies
+// on the model: the tree must index exactly the model's points.
+TEST(Recognition, TheLibrarysModelTreeIndexesTheModelsPoints) {
+  auto& library = bunny_library();
+  library.compress();
+  const PointCloud& points = library.model_points(0);
+  const KdTree3& tree = library.model_tree(0);
+  ASSERT_EQ(tree.size(), points.points.size());
+  for (size_t i = 0; i < points.points.size(); i += 97) {
+    const auto [nearest, d_sq] = tree.nearest(points.points[i]);
+    EXPECT_EQ(d_sq, 0.0f) << i;
+    EXPECT_EQ(points.points[nearest], points.points[i]) << i;
+  }
+  const float res = static_cast<float>(library.params().resolution_m);
+  EXPECT_FALSE(tree.nearest_within(points.points[0] + Eigen::Vector3f(1, 0, 0), 1.5f * res).has_value());
+}
+
 // A tee lying on a table with a wall-like box between it and the sensor: the part of the tee
 // the box hides is no evidence against it. (Counting hidden surface as unexplained refused
 // every instance more than a third occluded, and its overlap is held to less the hidden share.)

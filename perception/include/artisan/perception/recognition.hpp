@@ -73,6 +73,8 @@ class SpinImageLibrary {
   size_t model_count() const { return models_.size(); }
   const std::string& model_name(size_t m) const { return models_[m].name; }
   const PointCloud& model_points(size_t m) const { return models_[m].points; }
+  /// A k-d tree over model m's points, in the model's frame (made by compress()).
+  const KdTree3& model_tree(size_t m) const { return *models_[m].tree; }
   int components() const { return static_cast<int>(basis_.cols()); }  ///< eigen-spin-images kept
   size_t bins() const { return static_cast<size_t>(params_.spin.image_width * params_.spin.image_width); }
 
@@ -117,6 +119,7 @@ class SpinImageLibrary {
     Eigen::MatrixXf coefficients;
     std::shared_ptr<const detail::PairFeatureModel> pairs;
     std::shared_ptr<const detail::TurnAxes> turns;
+    std::shared_ptr<const KdTree3> tree;
     std::shared_ptr<const detail::ModelCylinder> cylinder;
     std::shared_ptr<const std::vector<detail::ModelCylinder>> round_parts;
     size_t planar_points = 0;
