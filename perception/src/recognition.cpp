@@ -269,15 +269,17 @@ class FreeSpace {
       // points), asked of the model's own tree in its frame, and only for the scene points the
       // tangent-plane test leaves: 0 not known yet, 1 on it, 2 off it. (Marking what lies on the
       // model from each of its points first, most of them hidden, cost more.)
+      const auto on_model_radius = static_cast<float>(1.5 * resolution_);
       const auto own = std::find_if(model_trees_.begin(), model_trees_.end(), [&](const ModelTree& m) { return m.points == &model; });
-      if (own == model_trees_.end()) throw Error("free-space test: the model checked is not one of the library's");
+      std::optional<KdTree3> made;  // for a model not the library's
+      const KdTree3& own_tree = own != model_trees_.end() ? *own->tree : made.emplace(model.points, on_model_radius);
       std::vector<char> on_model(scene_.points.size(), 0);
       const Eigen::Isometry3f to_model = T.inverse().cast<float>();
       const auto off_model = [&](size_t s) {
         std::atomic_ref<char> state(on_model[s]);
         char known = state.load(std::memory_order_relaxed);
         if (!known) {
-          known = own->tree->nearest_within(to_model * scene_.points[s], static_cast<float>(1.5 * resolution_)) ? 1 : 2;
+          known = own_tree.nearest_within(to_model * scene_.points[s], on_model_radius) ? 1 : 2;
           state.store(known, std::memory_order_relaxed);
         }
         return known == 2;
@@ -469,7 +471,7 @@ class FreeSpace {
   std::vector<char> support_;     ///< per scene point: on a background or a support plane
   std::vector<Solid> solids_;     ///< the faces of the background and support planes
   std::vector<Map> maps_;
-  std::vector<ModelTree> model_trees_;  ///< of every model that may be checked
+  std::vector<ModelTree> model_trees_;  ///< of the library's models
 };
 
 // A pose hypothesis (a group's, a pair of matches', a vote cluster's), with its cheap score.
