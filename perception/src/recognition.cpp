@@ -1285,7 +1285,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   const FreeSpace free_space = scene_free_space(scene_points, scene_tree, library, params);
   // Scene points that do not vote (neither as reference points nor as partners): those on a
   // background plane, and with no_votes_on_support on a support plane too, whose pairs fit any
-  // planar part of a model anywhere on them.
+  // planar part of a model anywhere on them. Nor are they fitted for cylinder axes: a plane
+  // holds none.
   const std::vector<char>& no_votes = params.no_votes_on_support ? free_space.support() : free_space.background();
   const IcpSettings coarse = coarse_icp(res), fine = fine_icp(res);
   detail::GroupingParams grouping;
@@ -1636,7 +1637,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   const auto scene_axes = [&](double radius) -> const std::vector<detail::SceneAxis>& {
     for (const auto& [r, axes] : axes_of_radius)
       if (std::abs(r - radius) < 0.25 * res) return axes;
-    return axes_of_radius.emplace_back(radius, detail::scene_axes(scene_points, scene_tree, radius, res, free_space.background(), params.axis_min_points))
+    return axes_of_radius.emplace_back(radius, detail::scene_axes(scene_points, scene_tree, radius, res, no_votes, params.axis_min_points))
         .second;
   };
   std::vector<Search> searches(library.model_count());

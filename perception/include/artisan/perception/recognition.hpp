@@ -267,6 +267,8 @@ struct RecognitionParams {
   /// 1.20 s per scene; alone it lost a tee, two valves and a pipe to wrong poses of the richer
   /// pool (188 found instead of 189, 12 false positives instead of 10); with `rivals` (below),
   /// which takes those back, 191 and 9 against 190 and 9 without it, 3.5 s per scene against 4.1.
+  /// Nor are they fitted for the scene's cylinder axes (axis_hypotheses): clutter bench, the same
+  /// detections on scenes 0-99 and 600-699, the axes found in about three quarters of the time.
   bool no_votes_on_support = true;
   /// With perspective views: the largest share of the explained model surface whose tangent
   /// plane the scene continues beyond the model's outline (no silhouette there: the model's
