@@ -149,7 +149,7 @@ class FreeSpace {
   Check check(const PointCloud& model, const Transform& T) const {
     return check(model, T, [](const Check&) { return true; });
   }
-  /// The same, measuring `continued` (two thirds of the work) only when `worth_it` holds for
+  /// The same, measuring `continued` (much of the work) only when `worth_it` holds for
   /// the rest of the check (`continued` 0 then); else it is NaN, not measured. With more than
   /// `most_through` of the model through a solid's face (measured first), nothing else is
   /// measured: every other figure NaN, which no test passes.
