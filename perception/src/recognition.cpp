@@ -680,7 +680,8 @@ std::vector<PoseHypothesis> axis_hypotheses(const detail::ModelCylinder& cylinde
 // are one pose; comparing rotations would count each turn as another.
 class SameSurface {
  public:
-  explicit SameSurface(const PointCloud& model, size_t sample_points = 32) : tree_(model.points) {
+  /// `tree`: over the model's points (the library's), kept by the caller.
+  SameSurface(const PointCloud& model, const KdTree3& tree, size_t sample_points = 32) : tree_(tree) {
     const size_t step = std::max<size_t>(1, model.points.size() / sample_points);
     for (size_t i = 0; i < model.points.size(); i += step) sample_.push_back(model.points[i]);
     centre_ = Eigen::Vector3d::Zero();
@@ -699,7 +700,7 @@ class SameSurface {
   }
 
  private:
-  KdTree3 tree_;
+  const KdTree3& tree_;
   std::vector<Eigen::Vector3f> sample_;
   Eigen::Vector3d centre_;
   double diameter_ = 0;
@@ -1648,7 +1649,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     s.unusable = explained;
     const PointCloud& model = library.model_points(m);
     s.surface_support = std::make_unique<SurfaceSupport>(model, params.pair_score_points, scene_points, scene_tree);
-    s.same = std::make_unique<SameSurface>(model);
+    s.same = std::make_unique<SameSurface>(model, library.model_tree(m));
     auto made = pair_hypotheses(model, scene_points, *s.surface_support, s.candidates, res, params);
     const auto t_voting = Clock::now();
     auto voted = voting_hypotheses(library.pair_features(m), scene_points, no_votes, *s.surface_support, res, params);
