@@ -1185,7 +1185,7 @@ void SpinImageLibrary::compress() {
   compressed_ = true;
 }
 
-std::vector<std::vector<SpinImageLibrary::Match>> SpinImageLibrary::nearest(const Eigen::MatrixXf& images, int k, bool compressed) {
+std::vector<std::vector<SpinImageLibrary::Match>> SpinImageLibrary::nearest(const Eigen::MatrixXf& images, int k, bool compressed, float max_d2) {
   compress();
   const auto n = images.cols();
   std::vector<std::vector<Match>> best(static_cast<size_t>(n));
@@ -1198,9 +1198,12 @@ std::vector<std::vector<SpinImageLibrary::Match>> SpinImageLibrary::nearest(cons
       std::vector<Eigen::Index> idx(kk);
       std::vector<float> d2(kk);
       const Eigen::VectorXf q = query.col(i);
-      index_->tree->query(q.data(), kk, idx.data(), d2.data());
+      nanoflann::KNNResultSet<float, Eigen::Index> found(kk);
+      found.init(idx.data(), d2.data());
+      d2[kk - 1] = max_d2;  // the worst distance kept until k are found: the search prunes beyond it
+      index_->tree->index->findNeighbors(found, q.data(), nanoflann::SearchParams());
       auto& b = best[static_cast<size_t>(i)];
-      for (size_t r = 0; r < kk; ++r) {
+      for (size_t r = 0; r < found.size(); ++r) {
         const auto& [m, p] = index_->owner[static_cast<size_t>(idx[r])];
         b.push_back({d2[r], m, p});
       }
@@ -1217,6 +1220,7 @@ std::vector<std::vector<SpinImageLibrary::Match>> SpinImageLibrary::nearest(cons
       auto& b = best[static_cast<size_t>(i)];
       for (Eigen::Index j = 0; j < dot.cols(); ++j) {
         const float d2 = query_sq[i] + lib_sq[j] - 2 * dot(i, j);
+        if (!(d2 < max_d2)) continue;
         if (static_cast<int>(b.size()) < k || d2 < b.back().d2) {
           if (static_cast<int>(b.size()) == k) b.pop_back();
           b.insert(std::upper_bound(b.begin(), b.end(), d2, [](float v, const Match& h) { return v < h.d2; }), Match{d2, m, static_cast<size_t>(j)});
@@ -1268,7 +1272,10 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // Nearest library images of each scene image, over all models, in the compressed (or full)
   // space. For unit vectors |a - b|^2 = 2 - 2 r, so a distance estimates the correlation r.
   t0 = Clock::now();
-  const auto best = library.nearest(scene_images, params.neighbours, params.compressed_search);
+  // (Matches below the least correlation are dropped below, on their estimate as it stands: the
+  // search need not look farther than that, and a little more.)
+  const auto farthest = static_cast<float>(2.0 * (1.0 - params.min_correlation) * (1 + 1e-4) + 1e-6);
+  const auto best = library.nearest(scene_images, params.neighbours, params.compressed_search, farthest);
   std::vector<std::vector<detail::Correspondence>> per_model(library.model_count());
   for (size_t i = 0; i < best.size(); ++i)
     for (const auto& h : best[i]) {

@@ -121,6 +121,51 @@ TEST(Recognition, CompressedSearchAgreesWithTheFullSearch) {
   EXPECT_LT(d.translation().norm(), 0.001);
 }
 
+// A search bounded by a distance returns, of each query's k nearest, exactly those within it:
+// in the compressed space (where the k-d tree prunes beyond the bound) and in the full one.
+TEST(Recognition, ASearchBoundedByADistanceKeepsTheNearestWithinIt) {
+  auto& library = bunny_library();
+  library.compress();
+  // Queries between two model images each (each mixed with one a third of the model away),
+  // normalised again: some near a library image, some far from all.
+  const Eigen::MatrixXf& images = library.model_images(0);
+  const Eigen::Index n = images.cols();
+  Eigen::MatrixXf queries(images.rows(), 200);
+  for (Eigen::Index i = 0; i < queries.cols(); ++i) {
+    const Eigen::Index a = i * (n / queries.cols());
+    const float mix = static_cast<float>(i % 10) / 10.0f;
+    Eigen::VectorXf q = (1 - mix) * images.col(a) + mix * images.col((a + n / 3) % n);
+    q.array() -= q.mean();
+    queries.col(i) = q.normalized();
+  }
+  constexpr int kK = 5;
+  for (const bool compressed : {true, false}) {
+    SCOPED_TRACE(compressed ? "compressed" : "full");
+    const auto all = library.nearest(queries, kK, compressed);
+    std::vector<float> d2;
+    for (const auto& matches : all) d2.push_back(matches.back().d2);
+    std::nth_element(d2.begin(), d2.begin() + static_cast<long>(d2.size() / 2), d2.end());
+    const float bound = d2[d2.size() / 2];  // the median query's k-th distance: about half are cut
+    const auto within = library.nearest(queries, kK, compressed, bound);
+    ASSERT_EQ(within.size(), all.size());
+    size_t cut = 0;
+    for (size_t i = 0; i < all.size(); ++i) {
+      std::vector<SpinImageLibrary::Match> expected;
+      for (const auto& m : all[i])
+        if (m.d2 < bound) expected.push_back(m);
+      cut += expected.size() < all[i].size();
+      ASSERT_EQ(within[i].size(), expected.size()) << "query " << i;
+      for (size_t r = 0; r < expected.size(); ++r) {
+        EXPECT_EQ(within[i][r].model, expected[r].model);
+        EXPECT_EQ(within[i][r].point, expected[r].point);
+        EXPECT_FLOAT_EQ(within[i][r].d2, expected[r].d2);
+      }
+    }
+    EXPECT_GT(cut, 50u);  // the bound cuts
+    EXPECT_LT(cut, 150u);
+  }
+}
+
 // The free-space test asks the model's own tree, in the model's frame, whether a scene point lies
 // on the model: the tree must index exactly the model's points.
 TEST(Recognition, TheLibrarysModelTreeIndexesTheModelsPoints) {

@@ -4,6 +4,7 @@
 // CVPR 1998) and searched in the compressed space; correspondences grouped per model, poses
 // estimated, refined by ICP and verified. Several models and several instances of one model.
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -108,8 +109,11 @@ class SpinImageLibrary {
   };
   /// The k nearest library images of each query column (normalised spin images, bins x n), over
   /// all models, nearest first: in the compressed space through a k-d tree over every model's
-  /// coefficients, or (compressed = false) by brute force over the full images.
-  std::vector<std::vector<Match>> nearest(const Eigen::MatrixXf& images, int k, bool compressed);
+  /// coefficients, or (compressed = false) by brute force over the full images. Only images
+  /// nearer than sqrt(max_d2) are returned (a query may have fewer than k); the k-d tree prunes
+  /// what lies beyond, so a query far from every library image (clutter) costs less.
+  std::vector<std::vector<Match>> nearest(const Eigen::MatrixXf& images, int k, bool compressed,
+                                          float max_d2 = std::numeric_limits<float>::infinity());
 
  private:
   struct Model {
