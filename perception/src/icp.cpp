@@ -35,11 +35,6 @@ IcpResult icp_point_to_plane(const PointCloud& source, const PointCloud& target,
   const size_t step = std::max<size_t>(1, source.points.size() / std::max<size_t>(1, settings.max_source_points));
   std::vector<size_t> samples;
   for (size_t i = 0; i < source.points.size(); i += step) samples.push_back(i);
-  std::vector<size_t> sparse;
-  if (settings.sparse_iterations > 0 && settings.sparse_source_points > 0 && settings.sparse_source_points < samples.size()) {
-    const size_t sparse_step = (samples.size() + settings.sparse_source_points - 1) / settings.sparse_source_points;
-    for (size_t k = 0; k < samples.size(); k += sparse_step) sparse.push_back(samples[k]);
-  }
   const auto max_d = static_cast<float>(settings.max_correspondence_distance_m);
   const float min_cos = static_cast<float>(std::cos(settings.max_normal_angle_deg * M_PI / 180.0));
 
@@ -47,9 +42,6 @@ IcpResult icp_point_to_plane(const PointCloud& source, const PointCloud& target,
   result.samples = samples.size();
   Transform T = T_target_source_init;
   for (int it = 0; it < settings.max_iterations; ++it) {
-    // The sparse samples first (at least the last iteration uses all).
-    const bool thin = !sparse.empty() && it < settings.sparse_iterations && it + 1 < settings.max_iterations;
-    const std::vector<size_t>& used = thin ? sparse : samples;
     const Eigen::Matrix3f R = T.linear().cast<float>();
     const Eigen::Vector3f t = T.translation().cast<float>();
     // The normal equations, summed over the samples that have a partner.
@@ -61,7 +53,7 @@ IcpResult icp_point_to_plane(const PointCloud& source, const PointCloud& target,
       void add(const Sums& o) { H += o.H, g += o.g, sq_sum += o.sq_sum, inliers += o.inliers; }
     };
     const auto add_sample = [&](size_t k, Sums& sums) {
-      const size_t i = used[k];
+      const size_t i = samples[k];
       const Eigen::Vector3f p = R * source.points[i] + t;
       const auto near = target_tree.nearest_within(p, max_d);
       if (!near) return;
@@ -83,13 +75,13 @@ IcpResult icp_point_to_plane(const PointCloud& source, const PointCloud& target,
     if (omp_in_parallel()) {
       // Called from a thread of a parallel region (one ICP per thread): a nested region would run
       // on this thread alone and cost more to open than a coarse ICP's iteration takes.
-      for (size_t k = 0; k < used.size(); ++k) add_sample(k, sums);
+      for (size_t k = 0; k < samples.size(); ++k) add_sample(k, sums);
     } else {
 #pragma omp parallel
       {
         Sums local;
 #pragma omp for nowait
-        for (size_t k = 0; k < used.size(); ++k) add_sample(k, local);
+        for (size_t k = 0; k < samples.size(); ++k) add_sample(k, local);
 #pragma omp critical
         sums.add(local);
       }
@@ -97,7 +89,6 @@ IcpResult icp_point_to_plane(const PointCloud& source, const PointCloud& target,
     const auto& [H, g, sq_sum, inliers] = sums;
     result.iterations = it + 1;
     result.inliers = inliers;
-    result.samples = used.size();
     result.rmse_m = inliers ? std::sqrt(sq_sum / inliers) : 0.0;
     if (inliers < 6) break;
     const Eigen::Matrix<double, 6, 1> x = H.ldlt().solve(-g);
@@ -108,16 +99,12 @@ IcpResult icp_point_to_plane(const PointCloud& source, const PointCloud& target,
     dT.translation() = x.tail<3>();
     T = dT * T;
     if (angle < settings.convergence_rotation_rad && x.tail<3>().norm() < settings.convergence_translation_m) {
-      if (thin) {  // converged on the sparse samples: on to all of them
-        it = std::max(it, settings.sparse_iterations - 1);
-        continue;
-      }
       result.converged = true;
       break;
     }
   }
   result.T_target_source = T;
-  result.overlap_fraction = result.samples == 0 ? 0.0 : static_cast<double>(result.inliers) / static_cast<double>(result.samples);
+  result.overlap_fraction = samples.empty() ? 0.0 : static_cast<double>(result.inliers) / samples.size();
   return result;
 }
 

@@ -858,13 +858,10 @@ FreeSpace scene_free_space(const PointCloud& scene_points, const KdTree3& scene_
 IcpSettings coarse_icp(double res) {
   IcpSettings coarse = detail::verification_icp(res, 15);
   coarse.max_source_points = 750;
-  coarse.sparse_iterations = 10;
-  coarse.sparse_source_points = 375;
   return coarse;
 }
 IcpSettings fine_icp(double res) {
   IcpSettings fine = coarse_icp(res);
-  fine.sparse_iterations = 0;
   fine.max_iterations = 40;
   fine.max_correspondence_distance_m = 1.0 * res;
   fine.max_source_points = 2000;

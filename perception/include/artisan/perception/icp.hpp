@@ -18,11 +18,6 @@ struct IcpSettings {
   double convergence_rotation_rad = 1e-5;       ///< [rad] stop when an update rotates less ...
   double convergence_translation_m = 1e-6;      ///< [m] ... and translates less than this
   size_t max_source_points = 4000;              ///< [1] source points used (evenly subsampled)
-  /// [1] The first `sparse_iterations` iterations use at most `sparse_source_points` of those
-  /// samples (evenly subsampled again): a start far off is brought near at a fraction of the cost,
-  /// and the iterations after, on every sample, place it and give the figures.
-  int sparse_iterations = 0;
-  size_t sparse_source_points = 0;
 };
 
 struct IcpResult {
