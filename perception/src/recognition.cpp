@@ -829,6 +829,8 @@ void check_inputs(const TriangleMesh& scene, const SpinImageLibrary& library, co
   for (const auto& [name, limit] : {std::pair{"max_continued_fraction", params.max_continued_fraction},
                                     std::pair{"max_continued_fraction_fixed", params.max_continued_fraction_fixed}})
     if (!(limit >= 0)) throw Error(std::string("recognition: ") + name + " " + std::to_string(limit) + " must not be negative");
+  if (!(params.min_correlation >= -1 && params.min_correlation <= 1))
+    throw Error("recognition: min_correlation " + std::to_string(params.min_correlation) + " must lie in [-1, 1]");
   if (!(params.max_incidence_deg > 0 && params.max_incidence_deg <= 90))
     throw Error("recognition: max_incidence_deg " + std::to_string(params.max_incidence_deg) + " must lie in (0, 90]");
   if (!(params.own_bin_min_incidence_deg > 0 && params.own_bin_min_incidence_deg <= 90))
@@ -1190,6 +1192,7 @@ std::vector<std::vector<SpinImageLibrary::Match>> SpinImageLibrary::nearest(cons
   if (compressed) {
     const Eigen::MatrixXf query = project(images);
     const size_t kk = std::min<size_t>(static_cast<size_t>(k), index_->owner.size());
+    if (kk == 0) return best;
 #pragma omp parallel for schedule(dynamic, 64)
     for (Eigen::Index i = 0; i < n; ++i) {
       std::vector<Eigen::Index> idx(kk);

@@ -397,6 +397,8 @@ TEST(Recognition, BadInputThrows) {
     expect_refused(incidence, [](RecognitionParams& p, double v) { p.max_incidence_deg = v; });
     expect_refused(incidence, [](RecognitionParams& p, double v) { p.own_bin_min_incidence_deg = v; });
   }
+  for (const double correlation : {-1.5, 1.01, std::numeric_limits<double>::quiet_NaN()})
+    expect_refused(correlation, [](RecognitionParams& p, double v) { p.min_correlation = v; });
   for (const double limit : {-0.01, std::numeric_limits<double>::quiet_NaN()}) {
     expect_refused(limit, [](RecognitionParams& p, double v) { p.max_continued_fraction = v; });
     expect_refused(limit, [](RecognitionParams& p, double v) { p.max_continued_fraction_fixed = v; });
