@@ -57,7 +57,8 @@ struct SceneAxis {
 
 /// The axes of the scene's cylindrical surfaces of `radius` [m] (outward normals, as a sensor
 /// sees a cylinder's outside), largest first, each with at least `min_points` scene points.
-/// Points with `ignore` set (background and support planes) are left out. `res` [m]: the scene's spacing.
+/// Points with `ignore` set (the planes that do not vote: background planes, and support planes
+/// with no_votes_on_support) are left out. `res` [m]: the scene's spacing.
 std::vector<SceneAxis> scene_axes(const PointCloud& scene, const KdTree3& scene_tree, double radius, double res, const std::vector<char>& ignore,
                                   size_t min_points);
 
