@@ -77,21 +77,24 @@ Plane largest_plane(const PointCloud& cloud, const std::vector<char>& taken, dou
   return best;
 }
 
+// A model of the library as its poses are fitted and checked: its points (with normals) and the
+// library's k-d tree over them, in the model's frame.
+struct LibraryModel {
+  const PointCloud& points;
+  const KdTree3& tree;
+};
+LibraryModel library_model(const SpinImageLibrary& library, size_t m) { return {library.model_points(m), library.model_tree(m)}; }
+
 // What each sensor saw of the scene, for the free-space test: per view, the nearest scene depth
 // in each bin of a projection (gnomonic about the view's main direction for perspective rays, an
 // orthographic grid for parallel rays).
 class FreeSpace {
  public:
-  /// A model's points and a k-d tree over them in its own frame (the library's).
-  struct ModelTree {
-    const PointCloud* points;
-    const KdTree3* tree;
-  };
   FreeSpace(const PointCloud& scene, const KdTree3& scene_tree, const std::vector<SensorView>& views, double resolution_m,
             double tolerance_m, double max_incidence_rad, size_t largest_model_points, size_t smallest_support, bool own_bin_only,
-            double own_bin_min_incidence_rad, std::vector<ModelTree> model_trees)
+            double own_bin_min_incidence_rad)
       : scene_(scene), tree_(scene_tree), resolution_(resolution_m), tolerance_(tolerance_m), min_incidence_cos_(std::cos(max_incidence_rad)),
-        own_bin_only_(own_bin_only), grazing_cos_(std::cos(own_bin_min_incidence_rad)), model_trees_(std::move(model_trees)) {
+        own_bin_only_(own_bin_only), grazing_cos_(std::cos(own_bin_min_incidence_rad)) {
     find_planes(largest_model_points, smallest_support);
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     for (const auto& p : scene.points) centroid += p.cast<double>();
@@ -146,7 +149,7 @@ class FreeSpace {
   /// With own_bin_only, a point met beyond the grazing incidence whose own bin holds no return
   /// (a face at grazing incidence whose returns the scanner dropped) is no evidence either way
   /// unless something the sensor saw hides it (it counts as occluded).
-  Check check(const PointCloud& model, const Transform& T) const {
+  Check check(const LibraryModel& model, const Transform& T) const {
     return check(model, T, [](const Check&) { return true; });
   }
   /// The same, measuring `continued` (much of the work) only when `worth_it` holds for
@@ -154,14 +157,14 @@ class FreeSpace {
   /// `most_through` of the model through a solid's face (measured first), nothing else is
   /// measured: every other figure NaN, which no test passes.
   template <typename WorthIt>
-  Check check(const PointCloud& model, const Transform& T, const WorthIt& worth_it,
+  Check check(const LibraryModel& model, const Transform& T, const WorthIt& worth_it,
               double most_through = std::numeric_limits<double>::infinity()) const {
     Check c;
-    std::vector<Eigen::Vector3d> p(model.points.size()), n(model.points.size());
+    std::vector<Eigen::Vector3d> p(model.points.points.size()), n(model.points.points.size());
 #pragma omp parallel for schedule(static)
     for (size_t i = 0; i < p.size(); ++i) {
-      p[i] = T * model.points[i].cast<double>();
-      n[i] = T.linear() * model.normals[i].cast<double>();
+      p[i] = T * model.points.points[i].cast<double>();
+      n[i] = T.linear() * model.points.normals[i].cast<double>();
     }
     // Through a solid's face: model points more than the tolerance in front of it and behind it,
     // both over its region. A part stands on a table; a pose whose tee branch or valve stem goes
@@ -270,16 +273,13 @@ class FreeSpace {
       // tangent-plane test leaves: 0 not known yet, 1 on it, 2 off it. (Marking what lies on the
       // model from each of its points first, most of them hidden, cost more.)
       const auto on_model_radius = static_cast<float>(1.5 * resolution_);
-      const auto own = std::find_if(model_trees_.begin(), model_trees_.end(), [&](const ModelTree& m) { return m.points == &model; });
-      std::optional<KdTree3> made;  // for a model not the library's
-      const KdTree3& own_tree = own != model_trees_.end() ? *own->tree : made.emplace(model.points, on_model_radius);
       std::vector<char> on_model(scene_.points.size(), 0);
       const Eigen::Isometry3f to_model = T.inverse().cast<float>();
       const auto off_model = [&](size_t s) {
         std::atomic_ref<char> state(on_model[s]);
         char known = state.load(std::memory_order_relaxed);
         if (!known) {
-          known = own_tree.nearest_within(to_model * scene_.points[s], on_model_radius) ? 1 : 2;
+          known = model.tree.nearest_within(to_model * scene_.points[s], on_model_radius) ? 1 : 2;
           state.store(known, std::memory_order_relaxed);
         }
         return known == 2;
@@ -471,7 +471,6 @@ class FreeSpace {
   std::vector<char> support_;     ///< per scene point: on a background or a support plane
   std::vector<Solid> solids_;     ///< the faces of the background and support planes
   std::vector<Map> maps_;
-  std::vector<ModelTree> model_trees_;  ///< of the library's models
 };
 
 // A pose hypothesis (a group's, a pair of matches', a vote cluster's), with its cheap score.
@@ -847,11 +846,8 @@ FreeSpace scene_free_space(const PointCloud& scene_points, const KdTree3& scene_
   }
   // Support planes are looked for only when they are used (else only the background planes).
   const size_t smallest_support = params.no_votes_on_support ? 2 * largest_planar_part : 0;
-  std::vector<FreeSpace::ModelTree> model_trees;
-  for (size_t m = 0; m < library.model_count(); ++m) model_trees.push_back({&library.model_points(m), &library.model_tree(m)});
   return FreeSpace(scene_points, scene_tree, params.views, res, params.free_space_tolerance_factor * res, params.max_incidence_deg * std::numbers::pi / 180,
-                   largest_model, smallest_support, params.free_space_own_bin, params.own_bin_min_incidence_deg * std::numbers::pi / 180,
-                   std::move(model_trees));
+                   largest_model, smallest_support, params.free_space_own_bin, params.own_bin_min_incidence_deg * std::numbers::pi / 180);
 }
 
 // The coarse ICP ranks starting poses, the fine one places and measures the few verified; on
@@ -882,10 +878,10 @@ struct Moved {
 // The model refined by the fine ICP from T_scene_model, and checked there unless the ICP's own
 // figures already fail.
 template <typename Passes>
-Moved refined_from(const PointCloud& model, const Transform& T_scene_model, const PointCloud& scene, const KdTree3& scene_tree,
+Moved refined_from(const LibraryModel& model, const Transform& T_scene_model, const PointCloud& scene, const KdTree3& scene_tree,
                    const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params, double res, const Passes& passes) {
   Moved m;
-  m.icp = icp_point_to_plane(model, scene, scene_tree, T_scene_model, fine);
+  m.icp = icp_point_to_plane(model.points, scene, scene_tree, T_scene_model, fine);
   if (!may_pass(m.icp, params, res)) return m;
   m.seen = free_space.check(model, m.icp.T_target_source);
   m.checked = true;
@@ -914,7 +910,7 @@ struct Turns {
   std::vector<IcpResult> coarse;
 };
 template <typename Passes, typename Taken>
-Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Transform& T_scene_model, double score, double coarse_overlap,
+Turns turns_of(const LibraryModel& model, const detail::TurnAxes& axes, const Transform& T_scene_model, double score, double coarse_overlap,
                const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& coarse, const IcpSettings& fine,
                const RecognitionParams& params, double res, const Passes& passes, const Taken& taken) {
   Turns out;
@@ -929,7 +925,7 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
     const double angle = 2 * std::numbers::pi * static_cast<double>(k % (steps - 1) + 1) / static_cast<double>(steps);
     const Transform T = T_scene_model * Eigen::Translation3d(axes.points[a]) *
                         Eigen::AngleAxisd(angle, axes.directions.col(static_cast<Eigen::Index>(a))) * Eigen::Translation3d(-axes.points[a]);
-    turned[k].icp = icp_point_to_plane(model, scene, scene_tree, T, coarse);
+    turned[k].icp = icp_point_to_plane(model.points, scene, scene_tree, T, coarse);
     turned[k].coarse_score = coarse_score(turned[k].icp, res);
   }
   for (const auto& t : turned) out.coarse.push_back(t.icp);
@@ -957,7 +953,7 @@ Turns turns_of(const PointCloud& model, const detail::TurnAxes& axes, const Tran
 // few millimetres short of the seen end leaves the scene's pipe carrying on past the model's
 // outline, one beyond it puts the end in free space.
 template <typename Passes>
-std::optional<Moved> slid_along(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, const PointCloud& scene,
+std::optional<Moved> slid_along(const LibraryModel& model, const detail::Slide& slide, const Transform& T_scene_model, const PointCloud& scene,
                                      const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params,
                                      double res, const Passes& passes) {
   if (params.axis_slide_steps < 1) return std::nullopt;
@@ -984,7 +980,7 @@ struct Slid {
   double shift = 0;  ///< [m] along the slide
   double score = -std::numeric_limits<double>::infinity();
 };
-std::vector<Slid> slides_of(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, double min_overlap,
+std::vector<Slid> slides_of(const LibraryModel& model, const detail::Slide& slide, const Transform& T_scene_model, double min_overlap,
                             const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine,
                             const RecognitionParams& params, double res) {
   const double step = params.axis_step_factor * res;
@@ -996,7 +992,7 @@ std::vector<Slid> slides_of(const PointCloud& model, const detail::Slide& slide,
     Slid& slid = slides[k];
     slid.shift = (k % 2 ? -1 : 1) * static_cast<double>(k / 2 + 1) * step;
     slid.T = T_scene_model * slide.by(slid.shift);
-    const double on_scene = figures_at(model, slid.T, scene, scene_tree, fine).overlap_fraction;
+    const double on_scene = figures_at(model.points, slid.T, scene, scene_tree, fine).overlap_fraction;
     if (on_scene < min_overlap) continue;
     // Its share in free space alone: the seen surface carried on past it is not measured.
     slid.score = on_scene - free_space.check(model, slid.T, [](const FreeSpace::Check&) { return false; }).free_space;
@@ -1010,7 +1006,7 @@ std::vector<Slid> slides_of(const PointCloud& model, const detail::Slide& slide,
 // more than `score` by rival_margin (a slide by a turn, as the winner's turns, by turn_margin). A
 // pipe that carries on into space the sensor saw through is wrong however well its seen part fits.
 template <typename Passes, typename Taken>
-std::optional<Moved> best_slide(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, double overlap,
+std::optional<Moved> best_slide(const LibraryModel& model, const detail::Slide& slide, const Transform& T_scene_model, double overlap,
                                 double score, const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space,
                                 const IcpSettings& fine, const RecognitionParams& params, double res, const Passes& passes, const Taken& taken) {
   if (!params.winner_slides) return std::nullopt;
@@ -1037,7 +1033,7 @@ std::optional<Moved> best_slide(const PointCloud& model, const detail::Slide& sl
 // short of its seen end leaves the scene carrying on past its outline, one past it puts its end
 // where the sensor saw through or saw nothing.
 template <typename Passes>
-std::optional<Moved> evidence_slide(const PointCloud& model, const detail::Slide& slide, const Transform& T_scene_model, const PointCloud& scene,
+std::optional<Moved> evidence_slide(const LibraryModel& model, const detail::Slide& slide, const Transform& T_scene_model, const PointCloud& scene,
                                     const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params,
                                     double res, const Passes& passes) {
   const auto steps = static_cast<int>(std::lround(3 * params.axis_step_factor));
@@ -1047,7 +1043,7 @@ std::optional<Moved> evidence_slide(const PointCloud& model, const detail::Slide
   for (size_t k = 0; k < slid.size(); ++k) {
     const Transform T = T_scene_model * slide.by((static_cast<double>(k) - steps) * res / 3);
     Moved& m = slid[k];
-    m.icp = figures_at(model, T, scene, scene_tree, fine);
+    m.icp = figures_at(model.points, T, scene, scene_tree, fine);
     m.seen = free_space.check(model, T);
     m.checked = true;
     m.passed = passes(m.icp, m.seen);
@@ -1490,12 +1486,12 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // The best starting poses are refined by the coarse ICP; in score order, the first that passes
   // the fine ICP and the visibility tests wins.
   const auto search = [&](Search& s) {
-    const PointCloud& model = library.model_points(s.m);
+    const LibraryModel model = library_model(library, s.m);
     const auto passes = passes_of(s.m);
     s.verified.clear();
     s.winner.reset();
     s.coarse_poses.clear();
-    const auto taken = [&](const Transform& T) { return on_accepted(model, T); };
+    const auto taken = [&](const Transform& T) { return on_accepted(model.points, T); };
     int turned_refused = 0;
     for (int round = 0; round < std::max(params.search_rounds, 1) && !s.winner; ++round) {
       std::vector<Verified> batch;
@@ -1503,7 +1499,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       // One coarse ICP per thread: each is too short (750 points) to share well.
 #pragma omp parallel for schedule(dynamic, 1)
       for (size_t k = 0; k < starts.size(); ++k)
-        if (PoseHypothesis& h = *starts[k].origin; !h.coarse) h.coarse = icp_point_to_plane(model, scene_points, scene_tree, h.T_scene_model, coarse);
+        if (PoseHypothesis& h = *starts[k].origin; !h.coarse) h.coarse = icp_point_to_plane(model.points, scene_points, scene_tree, h.T_scene_model, coarse);
       for (const auto& st : starts) {
         PoseHypothesis& h = *st.origin;
         const IcpResult& r = *h.coarse;
@@ -1540,7 +1536,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
           refused_on_plane(s, v.T, *v.seen);  // its coarse figures stand for the refined pose's (below)
           continue;
         }
-        v.icp = icp_point_to_plane(model, scene_points, scene_tree, v.T, fine);
+        v.icp = icp_point_to_plane(model.points, scene_points, scene_tree, v.T, fine);
         v.T = v.icp.T_target_source;
         v.seen.emplace(free_space.check(model, v.T));
         // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
@@ -1574,7 +1570,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // fits better (the model's share on the scene, less its share in free space) takes its place.
     // One that passes and loses may be a second instance beside the winner: with
     // losing_rivals_stay_open the next search tries it again.
-    const auto coarse_overlap = [&](const Transform& T) { return icp_point_to_plane(model, scene_points, scene_tree, T, coarse).overlap_fraction; };
+    const auto coarse_overlap = [&](const Transform& T) { return icp_point_to_plane(model.points, scene_points, scene_tree, T, coarse).overlap_fraction; };
     const size_t first_winner = *s.winner;
     double winner_coarse = coarse_overlap(s.verified[first_winner].T);
     if (params.rivals > 0) {
@@ -1626,7 +1622,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       w.score = turns.better->coarse_score;
     }
     s.coarse_poses.insert(s.coarse_poses.end(), turns.coarse.begin(), turns.coarse.end());
-    s.gain = newly_explained(model, w.T);
+    s.gain = newly_explained(model.points, w.T);
   };
   // The last search's poses, for diagnosis (`accepted`: its winner was).
   const auto record = [&](const Search& s, bool accepted) {
@@ -1722,12 +1718,12 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     auto& verified = next->verified;
     if (*next->winner != 0) std::swap(verified[*next->winner], verified.front());
     auto& top = verified.front();
-    const PointCloud& found_model = library.model_points(next->m);
+    const LibraryModel found_model = library_model(library, next->m);
     const auto slide = winner_slide(next->m);
     if (slide) {
       if (const auto slid = evidence_slide(found_model, *slide, top.T, scene_points, scene_tree, free_space, fine, params, res, passes_of(next->m))) {
         top.move_to(*slid);
-        next->gain = newly_explained(found_model, top.T);
+        next->gain = newly_explained(found_model.points, top.T);
       }
     }
     RecognizedInstance found;
@@ -1767,7 +1763,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // elsewhere (not a turn about the part's own symmetry) puts nearly as much of the model on the
     // scene (coarse ICP overlap) and passes the tests too; the best of the first three such.
     if (!found.ambiguous) {
-      const double overlap = icp_point_to_plane(found_model, scene_points, scene_tree, top.T, coarse).overlap_fraction;
+      const double overlap = icp_point_to_plane(found_model.points, scene_points, scene_tree, top.T, coarse).overlap_fraction;
       std::vector<const IcpResult*> rivals;
       for (const auto& other : next->coarse_poses) {
         const Transform& T = other.T_target_source;
@@ -1778,7 +1774,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       std::stable_sort(rivals.begin(), rivals.end(), [](const IcpResult* a, const IcpResult* b) { return a->overlap_fraction > b->overlap_fraction; });
       for (size_t k = 0; k < rivals.size() && k < 3 && !found.ambiguous; ++k) {
         const Transform& T = rivals[k]->T_target_source;
-        if (passes_of(next->m)(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model, T)) ambiguous_with(next->m, T);
+        if (passes_of(next->m)(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model.points, T)) ambiguous_with(next->m, T);
       }
     }
     // Ambiguous, failing that: the model slid along itself (a pipe along its run, an elbow about
@@ -1797,7 +1793,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         const Moved moved = refined_from(found_model, slides[k].T, scene_points, scene_tree, free_space, fine, params, res, passes_of(next->m));
         const Transform& T = moved.icp.T_target_source;
         if (moved.passed && moved.icp.overlap_fraction - moved.seen.free_space >= least && next->same->centre_distance(top.T, T) >= 0.1 * diameter &&
-            !on_accepted(found_model, T))
+            !on_accepted(found_model.points, T))
           ambiguous_with(next->m, T);
       }
     }
@@ -1857,10 +1853,10 @@ RecognitionCandidate check_pose(const TriangleMesh& scene, SpinImageLibrary& lib
   const PointCloud scene_points = sample_surface(scene, res);
   const KdTree3 scene_tree(scene_points.points, static_cast<float>(2.0 * res));
   const FreeSpace free_space = scene_free_space(scene_points, scene_tree, library, params);
-  const PointCloud& model = library.model_points(model_index);
+  const LibraryModel model = library_model(library, model_index);
   const IcpSettings fine = fine_icp(res);
-  const IcpResult icp = refine ? icp_point_to_plane(model, scene_points, scene_tree, T_scene_model, fine)
-                               : figures_at(model, T_scene_model, scene_points, scene_tree, fine);
+  const IcpResult icp = refine ? icp_point_to_plane(model.points, scene_points, scene_tree, T_scene_model, fine)
+                               : figures_at(model.points, T_scene_model, scene_points, scene_tree, fine);
   const FreeSpace::Check seen = free_space.check(model, icp.T_target_source);
   RecognitionCandidate c = candidate_of(model_index, icp.T_target_source, icp, &seen);
   const bool passed = meets_tests(icp, seen, params, res, {}, library.slides(model_index));
