@@ -1499,7 +1499,8 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
       // One coarse ICP per thread: each is too short (750 points) to share well.
 #pragma omp parallel for schedule(dynamic, 1)
       for (size_t k = 0; k < starts.size(); ++k)
-        if (PoseHypothesis& h = *starts[k].origin; !h.coarse) h.coarse = icp_point_to_plane(model.points, scene_points, scene_tree, h.T_scene_model, coarse);
+        if (PoseHypothesis& h = *starts[k].origin; !h.coarse)
+          h.coarse = icp_point_to_plane(model.points, scene_points, scene_tree, h.T_scene_model, coarse);
       for (const auto& st : starts) {
         PoseHypothesis& h = *st.origin;
         const IcpResult& r = *h.coarse;
@@ -1570,7 +1571,9 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // fits better (the model's share on the scene, less its share in free space) takes its place.
     // One that passes and loses may be a second instance beside the winner: with
     // losing_rivals_stay_open the next search tries it again.
-    const auto coarse_overlap = [&](const Transform& T) { return icp_point_to_plane(model.points, scene_points, scene_tree, T, coarse).overlap_fraction; };
+    const auto coarse_overlap = [&](const Transform& T) {
+      return icp_point_to_plane(model.points, scene_points, scene_tree, T, coarse).overlap_fraction;
+    };
     const size_t first_winner = *s.winner;
     double winner_coarse = coarse_overlap(s.verified[first_winner].T);
     if (params.rivals > 0) {
