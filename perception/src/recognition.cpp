@@ -8,9 +8,7 @@
 #include <limits>
 #include <numbers>
 #include <optional>
-#include <random>
 #include <string>
-#include <unordered_map>
 #include <utility>
 
 #include <Eigen/Eigenvalues>
@@ -23,6 +21,7 @@
 #include "axis_proposals.hpp"
 #include "correspondence_grouping.hpp"
 #include "free_space.hpp"
+#include "pose_hypotheses.hpp"
 #include "point_pair_voting.hpp"
 #include "slippage.hpp"
 
@@ -41,259 +40,13 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using detail::FreeSpace;
 using detail::LibraryModel;
+using detail::PoseHypothesis;
+using detail::SameSurface;
+using detail::SurfaceSupport;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // A model of the library as its poses are fitted and checked (FreeSpace::check).
 LibraryModel library_model(const SpinImageLibrary& library, size_t m) { return {library.model_points(m), library.model_tree(m)}; }
-
-// A pose hypothesis (a group's, a pair of matches', a vote cluster's), with its cheap score.
-struct PoseHypothesis {
-  Transform T_scene_model = Transform::Identity();
-  size_t first_support = 0;  ///< sampled model points on the scene surface when made
-  size_t support = 0;        ///< the same, leaving out the surface accepted instances explain
-  /// The scene points those sampled model points lie on, once ranked (its pose and tolerance do not
-  /// change: its support is recounted from them as surface gets explained).
-  std::optional<std::vector<uint32_t>> lies_on;
-  bool done = false;         ///< refined and verified (or made redundant): not tried again
-  RecognitionCandidate::Source source = RecognitionCandidate::Source::pairs;
-  size_t size = 0;           ///< a group's correspondences
-  std::optional<IcpResult> coarse;  ///< once refined by the coarse ICP
-};
-
-// A cheap verification of a model's pose, which ranks hypotheses before any ICP: of a sample of
-// the model's points (evenly spread), those at the pose that lie on the scene surface (within
-// `within_m` of a scene point whose normal agrees) not explained by an accepted instance.
-class SurfaceSupport {
- public:
-  SurfaceSupport(const PointCloud& model, int sample_points, const PointCloud& scene, const KdTree3& scene_tree)
-      : model_(model), scene_(scene), tree_(scene_tree), nothing_explained_(scene.points.size(), 0) {
-    const size_t step = std::max<size_t>(1, model.points.size() / static_cast<size_t>(std::max(sample_points, 1)));
-    for (size_t i = 0; i < model.points.size(); i += step) sample_.push_back(i);
-  }
-  /// The least support a new hypothesis needs: `share` of the sample.
-  size_t min_support(double share) const { return static_cast<size_t>(std::ceil(share * static_cast<double>(sample_.size()))); }
-  /// The support of a new hypothesis, with nothing explained yet.
-  size_t first(const Transform& T_scene_model, double within_m) const { return (*this)(T_scene_model, within_m, nothing_explained_); }
-  size_t operator()(const Transform& T_scene_model, double within_m, const std::vector<char>& explained) const {
-    return count(lies_on(T_scene_model, within_m), explained);
-  }
-  /// The scene point each sampled model point on the scene surface lies on (some may repeat).
-  std::vector<uint32_t> lies_on(const Transform& T_scene_model, double within_m) const {
-    const Eigen::Isometry3f T = T_scene_model.cast<float>();
-    std::vector<uint32_t> on;
-    for (const size_t i : sample_) {
-      const auto j = tree_.nearest_within(T * model_.points[i], static_cast<float>(within_m));
-      if (j && (T.linear() * model_.normals[i]).dot(scene_.normals[j->first]) >= 0.7f) on.push_back(static_cast<uint32_t>(j->first));
-    }
-    return on;
-  }
-  /// Of those, the ones not explained.
-  static size_t count(const std::vector<uint32_t>& lies_on, const std::vector<char>& explained) {
-    return static_cast<size_t>(std::count_if(lies_on.begin(), lies_on.end(), [&](uint32_t j) { return !explained[j]; }));
-  }
-
- private:
-  const PointCloud& model_;
-  const PointCloud& scene_;
-  const KdTree3& tree_;
-  const std::vector<char> nothing_explained_;
-  std::vector<size_t> sample_;
-};
-
-// The rigid transform that maps two oriented model points onto two oriented scene points in the
-// least-squares sense (Umeyama on the points and on points a pair length along each normal).
-Transform pose_from_pairs(const Eigen::Vector3f& m_a, const Eigen::Vector3f& nm_a, const Eigen::Vector3f& m_b, const Eigen::Vector3f& nm_b,
-                          const Eigen::Vector3f& s_a, const Eigen::Vector3f& ns_a, const Eigen::Vector3f& s_b, const Eigen::Vector3f& ns_b, float length) {
-  Eigen::Matrix<double, 3, 4> from, to;
-  from << m_a.cast<double>(), m_b.cast<double>(), (m_a + length * nm_a).cast<double>(), (m_b + length * nm_b).cast<double>();
-  to << s_a.cast<double>(), s_b.cast<double>(), (s_a + length * ns_a).cast<double>(), (s_b + length * ns_b).cast<double>();
-  Transform T = Transform::Identity();
-  T.matrix() = Eigen::umeyama(from, to, false);
-  return T;
-}
-
-// Pose hypotheses of one model from pairs of its matches (RecognitionParams::pair_*): for each
-// anchor scene point (in a fixed pseudo-random order), partner scene points within the model's
-// diameter; every combination of a model match of each whose point-pair features (Drost et al.
-// 2010: the distance, the angle of each normal to the joining line, the angle between the
-// normals) agree gives a pose, scored by SurfaceSupport: those with enough support.
-std::vector<PoseHypothesis> pair_hypotheses(const PointCloud& model, const PointCloud& scene, const SurfaceSupport& surface_support,
-                                            const std::vector<detail::Correspondence>& matches, double res, const RecognitionParams& params) {
-  std::vector<PoseHypothesis> made;
-  if (params.pair_partners <= 0 || matches.empty()) return made;
-  // The matched model points of each scene point.
-  std::unordered_map<size_t, size_t> anchor_of;
-  std::vector<size_t> anchors;                  // scene point indices
-  std::vector<std::vector<size_t>> model_of;    // per anchor: model point indices
-  for (const auto& c : matches) {
-    auto [it, inserted] = anchor_of.try_emplace(c.target, anchors.size());
-    if (inserted) anchors.push_back(c.target), model_of.emplace_back();
-    model_of[it->second].push_back(c.source);
-  }
-  std::vector<Eigen::Vector3f> anchor_points;
-  for (const size_t a : anchors) anchor_points.push_back(scene.points[a]);
-  const KdTree3 anchor_tree(anchor_points);
-  Eigen::AlignedBox3f box;
-  for (const auto& p : model.points) box.extend(p);
-  const float diameter = box.diagonal().norm();
-  const float min_distance = static_cast<float>(params.pair_min_distance_factor * res);
-  const float tolerance = static_cast<float>(params.pair_distance_tolerance_factor * res);
-  const float angle_tolerance = static_cast<float>(params.pair_angle_tolerance_deg * std::numbers::pi / 180);
-  const size_t min_support = surface_support.min_support(params.pair_min_support);
-  const auto angle = [](const Eigen::Vector3f& a, const Eigen::Vector3f& b) { return std::acos(std::clamp(a.dot(b), -1.0f, 1.0f)); };
-
-  std::vector<size_t> order(anchors.size());
-  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::mt19937 rng(params.pair_seed);  // the same scene gives the same hypotheses
-  std::shuffle(order.begin(), order.end(), rng);
-  if (order.size() > static_cast<size_t>(std::max(params.pair_anchors, 0))) order.resize(static_cast<size_t>(std::max(params.pair_anchors, 0)));
-  // The pairs tried, drawn in order (the draws are the hypotheses' order), then made and scored
-  // in parallel. The anchors' partners are found in parallel a block of anchors at a time (the
-  // lists of all 1,500 anchors would hold some 4 million entries), and drawn from in order.
-  constexpr size_t kBlock = 64;
-  std::vector<std::vector<size_t>> near(std::min(order.size(), kBlock));
-  std::vector<std::pair<size_t, size_t>> tried;
-  for (size_t first = 0; first < order.size(); first += kBlock) {
-    const size_t count = std::min(kBlock, order.size() - first);
-#pragma omp parallel for schedule(dynamic, 4)
-    for (size_t k = 0; k < count; ++k) {
-      const Eigen::Vector3f& s_a = anchor_points[order[first + k]];
-      anchor_tree.within(s_a, diameter, near[k]);
-      std::erase_if(near[k], [&](size_t b) { return (anchor_points[b] - s_a).norm() < min_distance; });
-    }
-    for (size_t k = 0; k < count; ++k)
-      for (int t = 0; !near[k].empty() && t < params.pair_partners; ++t) tried.emplace_back(order[first + k], near[k][rng() % near[k].size()]);
-  }
-  std::vector<std::vector<PoseHypothesis>> of_pair(tried.size());
-#pragma omp parallel for schedule(dynamic, 16)
-  for (size_t k = 0; k < tried.size(); ++k) {
-    const auto [a, b] = tried[k];
-    const Eigen::Vector3f& s_a = scene.points[anchors[a]];
-    const Eigen::Vector3f& ns_a = scene.normals[anchors[a]];
-    const Eigen::Vector3f& s_b = scene.points[anchors[b]];
-    const Eigen::Vector3f& ns_b = scene.normals[anchors[b]];
-    const Eigen::Vector3f d_s = s_b - s_a;
-    const float l_s = d_s.norm();
-    const Eigen::Vector3f u_s = d_s / l_s;
-    const float f1 = angle(ns_a, u_s), f2 = angle(ns_b, u_s), f3 = angle(ns_a, ns_b);
-    for (const size_t m_a : model_of[a])
-      for (const size_t m_b : model_of[b]) {
-        if (m_a == m_b) continue;
-        const Eigen::Vector3f d_m = model.points[m_b] - model.points[m_a];
-        const float l_m = d_m.norm();
-        if (std::abs(l_m - l_s) > tolerance) continue;
-        const Eigen::Vector3f u_m = d_m / l_m;
-        if (std::abs(angle(model.normals[m_a], u_m) - f1) > angle_tolerance || std::abs(angle(model.normals[m_b], u_m) - f2) > angle_tolerance ||
-            std::abs(angle(model.normals[m_a], model.normals[m_b]) - f3) > angle_tolerance)
-          continue;
-        PoseHypothesis h;
-        h.T_scene_model = pose_from_pairs(model.points[m_a], model.normals[m_a], model.points[m_b], model.normals[m_b], s_a, ns_a, s_b, ns_b, l_s);
-        h.first_support = h.support = surface_support.first(h.T_scene_model, 1.5 * res);
-        if (h.support >= min_support) of_pair[k].push_back(std::move(h));
-      }
-  }
-  for (auto& hypotheses : of_pair) made.insert(made.end(), std::make_move_iterator(hypotheses.begin()), std::make_move_iterator(hypotheses.end()));
-  return made;
-}
-
-// Hypotheses from point-pair-feature voting: the best vote clusters, scored by SurfaceSupport;
-// those with enough support.
-std::vector<PoseHypothesis> voting_hypotheses(const detail::PairFeatureModel& table, const PointCloud& scene, const std::vector<char>& background,
-                                              const SurfaceSupport& surface_support, double res, const RecognitionParams& params) {
-  std::vector<PoseHypothesis> made;
-  if (params.voting_pool <= 0) return made;
-  auto voted = table.vote(scene, background);
-  if (voted.size() > static_cast<size_t>(params.voting_pool)) voted.resize(static_cast<size_t>(params.voting_pool));
-  const size_t min_support = surface_support.min_support(params.pair_min_support);
-  std::vector<PoseHypothesis> scored(voted.size());
-#pragma omp parallel for schedule(dynamic, 4)
-  for (size_t k = 0; k < voted.size(); ++k) {
-    PoseHypothesis& h = scored[k];
-    h.T_scene_model = voted[k].T_scene_model;
-    h.source = RecognitionCandidate::Source::voting;
-    h.first_support = h.support = surface_support.first(h.T_scene_model, 1.5 * res);
-  }
-  for (auto& h : scored)
-    if (h.support >= min_support) made.push_back(std::move(h));
-  return made;
-}
-
-// Hypotheses of a model made mostly of one cylinder (RecognitionParams::axis_hypotheses), or of
-// a round part of one (round_part_hypotheses: `source` round_part), on the scene's cylinder axes
-// of the cylinder's radius, scored by SurfaceSupport: per axis, those with enough support and at
-// least 90% of the best there (a pipe partly hidden fits equally well at every shift that keeps
-// its seen part on the scene: the visibility tests choose among them).
-std::vector<PoseHypothesis> axis_hypotheses(const detail::ModelCylinder& cylinder, const std::vector<detail::SceneAxis>& axes,
-                                            const SurfaceSupport& surface_support, double res, const RecognitionParams& params,
-                                            RecognitionCandidate::Source source = RecognitionCandidate::Source::axis) {
-  std::vector<PoseHypothesis> made;
-  const size_t min_support = surface_support.min_support(params.pair_min_support);
-  for (const auto& axis : axes) {
-    const auto poses = detail::poses_on_axis(cylinder, axis, params.axis_step_factor * res, params.turn_steps);
-    std::vector<PoseHypothesis> on(poses.size());
-#pragma omp parallel for schedule(dynamic, 4)
-    for (size_t k = 0; k < poses.size(); ++k) {
-      PoseHypothesis& h = on[k];
-      h.T_scene_model = poses[k];
-      h.source = source;
-      h.first_support = h.support = surface_support.first(poses[k], 1.5 * res);
-    }
-    size_t best = 0;
-    for (const auto& h : on) best = std::max(best, h.support);
-    for (auto& h : on)
-      if (h.support >= min_support && 10 * h.support >= 9 * best) made.push_back(std::move(h));
-  }
-  return made;
-}
-
-// Whether two poses of a model put its surface in the same place: every one of a sample of its
-// points (evenly spread) at one pose lies within a tolerance of the model's surface at the
-// other. Poses that a symmetry of the model relates (a flange or a pipe turned about its axis)
-// are one pose; comparing rotations would count each turn as another.
-class SameSurface {
- public:
-  /// `tree`: over the model's points (the library's), kept by the caller.
-  SameSurface(const PointCloud& model, const KdTree3& tree, size_t sample_points = 32) : tree_(tree) {
-    const size_t step = std::max<size_t>(1, model.points.size() / sample_points);
-    for (size_t i = 0; i < model.points.size(); i += step) sample_.push_back(model.points[i]);
-    centre_ = Eigen::Vector3d::Zero();
-    for (const auto& p : model.points) centre_ += p.cast<double>();
-    centre_ /= static_cast<double>(std::max<size_t>(model.points.size(), 1));
-    diameter_ = model.bounds().diagonal().norm();
-  }
-  double diameter() const { return diameter_; }
-  /// How far apart the two poses put the centroid of the model's surface.
-  double centre_distance(const Transform& a, const Transform& b) const { return (a * centre_ - b * centre_).norm(); }
-  bool operator()(const Transform& a, const Transform& b, double tolerance_m) const {
-    // The centroid of the surface first (cheap): a symmetry keeps it.
-    if (centre_distance(a, b) > tolerance_m) return false;
-    const Eigen::Isometry3f T = (b.inverse() * a).cast<float>();
-    return std::all_of(sample_.begin(), sample_.end(), [&](const Eigen::Vector3f& x) { return tree_.nearest_within(T * x, static_cast<float>(tolerance_m)).has_value(); });
-  }
-
- private:
-  const KdTree3& tree_;
-  std::vector<Eigen::Vector3f> sample_;
-  Eigen::Vector3d centre_;
-  double diameter_ = 0;
-};
-
-// The best distinct hypotheses, best first: one of those that put the model's centre within a
-// tenth of its diameter and turn it by less than 20 degrees from each other. (Merging a
-// symmetric part's turns here as well, as the searches do, lost a pipe in bench scene 2: the
-// pool needs the variety.)
-std::vector<PoseHypothesis> best_distinct(std::vector<PoseHypothesis> made, const SameSurface& same, size_t pool) {
-  std::vector<PoseHypothesis> out;
-  std::stable_sort(made.begin(), made.end(), [](const PoseHypothesis& x, const PoseHypothesis& y) { return x.support > y.support; });
-  const auto duplicate = [&](const Transform& a, const Transform& b) {
-    return same.centre_distance(a, b) < 0.1 * same.diameter() && rotation_angle(a.inverse() * b) < 20.0 * std::numbers::pi / 180;
-  };
-  for (auto& h : made) {
-    if (out.size() >= pool) break;
-    if (std::none_of(out.begin(), out.end(), [&](const PoseHypothesis& o) { return duplicate(h.T_scene_model, o.T_scene_model); })) out.push_back(std::move(h));
-  }
-  return out;
-}
 
 // A point of the line parallel to `direction` that the model's normals point at most: the axis
 // of a surface of revolution (every normal of one meets its axis), found robustly for parts that
@@ -1232,20 +985,20 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     const PointCloud& model = library.model_points(m);
     s.surface_support = std::make_unique<SurfaceSupport>(model, params.pair_score_points, scene_points, scene_tree);
     s.same = std::make_unique<SameSurface>(model, library.model_tree(m));
-    auto made = pair_hypotheses(model, scene_points, *s.surface_support, s.candidates, res, params);
+    auto made = detail::pair_hypotheses(model, scene_points, *s.surface_support, s.candidates, res, params);
     const auto t_voting = Clock::now();
-    auto voted = voting_hypotheses(library.pair_features(m), scene_points, no_votes, *s.surface_support, res, params);
+    auto voted = detail::voting_hypotheses(library.pair_features(m), scene_points, no_votes, *s.surface_support, res, params);
     result.seconds_voting += since(t_voting);
     made.insert(made.end(), std::make_move_iterator(voted.begin()), std::make_move_iterator(voted.end()));
     if (const auto* cylinder = library.cylinder(m); cylinder && params.axis_hypotheses) {
-      auto on_axes = axis_hypotheses(*cylinder, scene_axes(cylinder->radius), *s.surface_support, res, params);
+      auto on_axes = detail::axis_hypotheses(*cylinder, scene_axes(cylinder->radius), *s.surface_support, res, params);
       made.insert(made.end(), std::make_move_iterator(on_axes.begin()), std::make_move_iterator(on_axes.end()));
     }
-    for (auto& h : best_distinct(std::move(made), *s.same, static_cast<size_t>(std::max(params.pair_pool, 0)))) s.hypotheses.push_back(std::move(h));
+    for (auto& h : detail::best_distinct(std::move(made), *s.same, static_cast<size_t>(std::max(params.pair_pool, 0)))) s.hypotheses.push_back(std::move(h));
     // Round parts' hypotheses are ranked apart (below), so none is crowded out of the pool.
     if (params.round_part_hypotheses)
       for (const auto& part : library.round_parts(m))
-        for (auto& h : axis_hypotheses(part, scene_axes(part.radius), *s.surface_support, res, params, RecognitionCandidate::Source::round_part))
+        for (auto& h : detail::axis_hypotheses(part, scene_axes(part.radius), *s.surface_support, res, params, RecognitionCandidate::Source::round_part))
           s.hypotheses.push_back(std::move(h));
   }
   result.seconds_hypotheses = since(t0);
