@@ -192,6 +192,18 @@ IcpSettings fine_icp(double res) {
   return fine;
 }
 
+// What a model's poses are refined against and checked by: the scene's points and their tree,
+// what the sensors saw of it, the coarse and the fine ICP, the parameters and the resolution.
+struct SceneFit {
+  const PointCloud& scene;
+  const KdTree3& scene_tree;
+  const FreeSpace& free_space;
+  const IcpSettings& coarse;
+  const IcpSettings& fine;
+  const RecognitionParams& params;
+  double res;
+};
+
 // A pose moved from another (turned about an axis, slid along one), refined and checked.
 struct Moved {
   IcpResult icp;
@@ -204,12 +216,11 @@ struct Moved {
 // The model refined by the fine ICP from T_scene_model, and checked there unless the ICP's own
 // figures already fail.
 template <typename Passes>
-Moved refined_from(const LibraryModel& model, const Transform& T_scene_model, const PointCloud& scene, const KdTree3& scene_tree,
-                   const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params, double res, const Passes& passes) {
+Moved refined_from(const LibraryModel& model, const Transform& T_scene_model, const SceneFit& fit, const Passes& passes) {
   Moved m;
-  m.icp = icp_point_to_plane(model.points, scene, scene_tree, T_scene_model, fine);
-  if (!may_pass(m.icp, params, res)) return m;
-  m.seen = free_space.check(model, m.icp.T_target_source);
+  m.icp = icp_point_to_plane(model.points, fit.scene, fit.scene_tree, T_scene_model, fit.fine);
+  if (!may_pass(m.icp, fit.params, fit.res)) return m;
+  m.seen = fit.free_space.check(model, m.icp.T_target_source);
   m.checked = true;
   m.passed = passes(m.icp, m.seen);
   return m;
@@ -217,11 +228,10 @@ Moved refined_from(const LibraryModel& model, const Transform& T_scene_model, co
 
 // The fine ICP's figures of the model where T_scene_model puts it, not moved: its first
 // iteration's correspondences (share on the scene, residual), its pose T_scene_model itself.
-IcpResult figures_at(const PointCloud& model, const Transform& T_scene_model, const PointCloud& scene, const KdTree3& scene_tree,
-                     const IcpSettings& fine) {
-  IcpSettings at_pose = fine;
+IcpResult figures_at(const PointCloud& model, const Transform& T_scene_model, const SceneFit& fit) {
+  IcpSettings at_pose = fit.fine;
   at_pose.max_iterations = 1;
-  IcpResult icp = icp_point_to_plane(model, scene, scene_tree, T_scene_model, at_pose);
+  IcpResult icp = icp_point_to_plane(model, fit.scene, fit.scene_tree, T_scene_model, at_pose);
   icp.T_target_source = T_scene_model;
   return icp;
 }
@@ -237,8 +247,8 @@ struct Turns {
 };
 template <typename Passes, typename Taken>
 Turns turns_of(const LibraryModel& model, const detail::TurnAxes& axes, const Transform& T_scene_model, double score, double coarse_overlap,
-               const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& coarse, const IcpSettings& fine,
-               const RecognitionParams& params, double res, const Passes& passes, const Taken& taken) {
+               const SceneFit& fit, const Passes& passes, const Taken& taken) {
+  const RecognitionParams& params = fit.params;
   Turns out;
   if (params.turn_steps < 2) return out;
   const auto steps = static_cast<size_t>(params.turn_steps);
@@ -251,8 +261,8 @@ Turns turns_of(const LibraryModel& model, const detail::TurnAxes& axes, const Tr
     const double angle = 2 * std::numbers::pi * static_cast<double>(k % (steps - 1) + 1) / static_cast<double>(steps);
     const Transform T = T_scene_model * Eigen::Translation3d(axes.points[a]) *
                         Eigen::AngleAxisd(angle, axes.directions.col(static_cast<Eigen::Index>(a))) * Eigen::Translation3d(-axes.points[a]);
-    turned[k].icp = icp_point_to_plane(model.points, scene, scene_tree, T, coarse);
-    turned[k].coarse_score = coarse_score(turned[k].icp, res);
+    turned[k].icp = icp_point_to_plane(model.points, fit.scene, fit.scene_tree, T, fit.coarse);
+    turned[k].coarse_score = coarse_score(turned[k].icp, fit.res);
   }
   for (const auto& t : turned) out.coarse.push_back(t.icp);
   std::erase_if(turned, [&](const Moved& t) { return t.icp.overlap_fraction <= coarse_overlap + params.turn_margin; });
@@ -260,7 +270,7 @@ Turns turns_of(const LibraryModel& model, const detail::TurnAxes& axes, const Tr
   if (turned.size() > 3) turned.resize(3);
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t k = 0; k < turned.size(); ++k) {
-    Moved refined = refined_from(model, turned[k].icp.T_target_source, scene, scene_tree, free_space, fine, params, res, passes);
+    Moved refined = refined_from(model, turned[k].icp.T_target_source, fit, passes);
     refined.coarse_score = turned[k].coarse_score;  // the coarse pose's, which the winner keeps as its score
     turned[k] = refined;
   }
@@ -279,15 +289,16 @@ Turns turns_of(const LibraryModel& model, const detail::TurnAxes& axes, const Tr
 // few millimetres short of the seen end leaves the scene's pipe carrying on past the model's
 // outline, one beyond it puts the end in free space.
 template <typename Passes>
-std::optional<Moved> slid_along(const LibraryModel& model, const detail::Slide& slide, const Transform& T_scene_model, const PointCloud& scene,
-                                     const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params,
-                                     double res, const Passes& passes) {
+std::optional<Moved> slid_along(const LibraryModel& model, const detail::Slide& slide, const Transform& T_scene_model, const SceneFit& fit,
+                                const Passes& passes) {
+  const RecognitionParams& params = fit.params;
+  const double res = fit.res;
   if (params.axis_slide_steps < 1) return std::nullopt;
   std::vector<Moved> slid(2 * static_cast<size_t>(params.axis_slide_steps));
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t k = 0; k < slid.size(); ++k) {
     const int shift = (k % 2 ? -1 : 1) * static_cast<int>(k / 2 + 1);
-    slid[k] = refined_from(model, T_scene_model * slide.by(shift * res), scene, scene_tree, free_space, fine, params, res, passes);
+    slid[k] = refined_from(model, T_scene_model * slide.by(shift * res), fit, passes);
   }
   std::optional<Moved> best;
   for (const auto& m : slid)
@@ -307,9 +318,8 @@ struct Slid {
   double score = -std::numeric_limits<double>::infinity();
 };
 std::vector<Slid> slides_of(const LibraryModel& model, const detail::Slide& slide, const Transform& T_scene_model, double min_overlap,
-                            const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine,
-                            const RecognitionParams& params, double res) {
-  const double step = params.axis_step_factor * res;
+                            const SceneFit& fit) {
+  const double step = fit.params.axis_step_factor * fit.res;
   const auto steps = static_cast<int>(0.5 * slide.extent / step);
   if (steps < 1) return {};
   std::vector<Slid> slides(2 * static_cast<size_t>(steps));
@@ -318,10 +328,10 @@ std::vector<Slid> slides_of(const LibraryModel& model, const detail::Slide& slid
     Slid& slid = slides[k];
     slid.shift = (k % 2 ? -1 : 1) * static_cast<double>(k / 2 + 1) * step;
     slid.T = T_scene_model * slide.by(slid.shift);
-    const double on_scene = figures_at(model.points, slid.T, scene, scene_tree, fine).overlap_fraction;
+    const double on_scene = figures_at(model.points, slid.T, fit).overlap_fraction;
     if (on_scene < min_overlap) continue;
     // Its share in free space alone: the seen surface carried on past it is not measured.
-    slid.score = on_scene - free_space.check(model, slid.T, [](const FreeSpace::Check&) { return false; }).free_space;
+    slid.score = on_scene - fit.free_space.check(model, slid.T, [](const FreeSpace::Check&) { return false; }).free_space;
   }
   return slides;
 }
@@ -333,16 +343,16 @@ std::vector<Slid> slides_of(const LibraryModel& model, const detail::Slide& slid
 // pipe that carries on into space the sensor saw through is wrong however well its seen part fits.
 template <typename Passes, typename Taken>
 std::optional<Moved> best_slide(const LibraryModel& model, const detail::Slide& slide, const Transform& T_scene_model, double overlap,
-                                double score, const PointCloud& scene, const KdTree3& scene_tree, const FreeSpace& free_space,
-                                const IcpSettings& fine, const RecognitionParams& params, double res, const Passes& passes, const Taken& taken) {
+                                double score, const SceneFit& fit, const Passes& passes, const Taken& taken) {
+  const RecognitionParams& params = fit.params;
   if (!params.winner_slides) return std::nullopt;
-  const auto slides = slides_of(model, slide, T_scene_model, overlap - params.rival_coarse_slack, scene, scene_tree, free_space, fine, params, res);
+  const auto slides = slides_of(model, slide, T_scene_model, overlap - params.rival_coarse_slack, fit);
   if (slides.empty()) return std::nullopt;
   const auto best = std::max_element(slides.begin(), slides.end(), [](const Slid& a, const Slid& b) { return a.score < b.score; });
   // A slide by a turn (an elbow about its bend) is held to the margin of the winner's turns.
   const double margin = slide.radius > 0 ? params.turn_margin : params.rival_margin;
   if (!(best->score > score + margin)) return std::nullopt;
-  Moved moved = refined_from(model, best->T, scene, scene_tree, free_space, fine, params, res, passes);
+  Moved moved = refined_from(model, best->T, fit, passes);
   if (!moved.passed || !(moved.icp.overlap_fraction - moved.seen.free_space > score + margin) || taken(moved.icp.T_target_source))
     return std::nullopt;
   return moved;
@@ -359,9 +369,10 @@ std::optional<Moved> best_slide(const LibraryModel& model, const detail::Slide& 
 // short of its seen end leaves the scene carrying on past its outline, one past it puts its end
 // where the sensor saw through or saw nothing.
 template <typename Passes>
-std::optional<Moved> evidence_slide(const LibraryModel& model, const detail::Slide& slide, const Transform& T_scene_model, const PointCloud& scene,
-                                    const KdTree3& scene_tree, const FreeSpace& free_space, const IcpSettings& fine, const RecognitionParams& params,
-                                    double res, const Passes& passes) {
+std::optional<Moved> evidence_slide(const LibraryModel& model, const detail::Slide& slide, const Transform& T_scene_model, const SceneFit& fit,
+                                    const Passes& passes) {
+  const RecognitionParams& params = fit.params;
+  const double res = fit.res;
   const auto steps = static_cast<int>(std::lround(3 * params.axis_step_factor));
   if (!params.evidence_slides || steps < 1) return std::nullopt;
   std::vector<Moved> slid(2 * static_cast<size_t>(steps) + 1);
@@ -369,8 +380,8 @@ std::optional<Moved> evidence_slide(const LibraryModel& model, const detail::Sli
   for (size_t k = 0; k < slid.size(); ++k) {
     const Transform T = T_scene_model * slide.by((static_cast<double>(k) - steps) * res / 3);
     Moved& m = slid[k];
-    m.icp = figures_at(model.points, T, scene, scene_tree, fine);
-    m.seen = free_space.check(model, T);
+    m.icp = figures_at(model.points, T, fit);
+    m.seen = fit.free_space.check(model, T);
     m.checked = true;
     m.passed = passes(m.icp, m.seen);
   }
@@ -622,6 +633,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   // holds none.
   const std::vector<char>& no_votes = params.no_votes_on_support ? free_space.support() : free_space.background();
   const IcpSettings coarse = coarse_icp(res), fine = fine_icp(res);
+  const SceneFit fit{scene_points, scene_tree, free_space, coarse, fine, params, res};
   detail::GroupingParams grouping;
   grouping.similarity_ratio = 0.0;  // the correlation threshold already filtered
   grouping.geometric_consistency = params.geometric_consistency;
@@ -869,7 +881,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
         // what keeps the pose from passing; so is a flange's along its neck's.
         if (const auto slide = refused_slide(s.m); slide && !passes(v.icp, *v.seen) && meets(s.m, v.icp, *v.seen, near_passing))
-          if (auto slid = slid_along(model, *slide, v.T, scene_points, scene_tree, free_space, fine, params, res, passes))
+          if (auto slid = slid_along(model, *slide, v.T, fit, passes))
             v.move_to(*slid);
         // A part the ICP fits to the scene (its overlap and residual pass) that the visibility tests
         // refuse may lie at the right place turned wrong about its run: a tee's branch or a valve's
@@ -879,8 +891,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
         if (turned_refused < params.refused_turns && !passes(v.icp, *v.seen) && meets(s.m, v.icp, *v.seen, fits_only)) {
           ++turned_refused;
           constexpr double kAny = -std::numeric_limits<double>::infinity();
-          auto turns = turns_of(model, library.turn_axes(s.m), v.T, kAny, kAny, scene_points, scene_tree, free_space, coarse, fine, params, res,
-                                passes, taken);
+          auto turns = turns_of(model, library.turn_axes(s.m), v.T, kAny, kAny, fit, passes, taken);
           if (turns.better && turns.better->seen.occluded < 0.5) v.move_to(*turns.better);
         }
         const auto& seen = *v.seen;
@@ -915,7 +926,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
 #pragma omp parallel for schedule(dynamic, 1)
       for (size_t j = 0; j < rivals.size(); ++j) {
         auto& v = s.verified[rivals[j]];
-        const Moved refined = refined_from(model, v.T, scene_points, scene_tree, free_space, fine, params, res, passes);
+        const Moved refined = refined_from(model, v.T, fit, passes);
         v.move_to(refined);
         ok[j] = refined.passed;
       }
@@ -933,8 +944,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     }
     if (const auto slide = winner_slide(s.m)) {
       auto& w = s.verified[*s.winner];
-      if (auto slid = best_slide(model, *slide, w.T, w.icp.overlap_fraction, w.icp.overlap_fraction - w.seen->free_space, scene_points, scene_tree,
-                                 free_space, fine, params, res, passes, taken)) {
+      if (auto slid = best_slide(model, *slide, w.T, w.icp.overlap_fraction, w.icp.overlap_fraction - w.seen->free_space, fit, passes, taken)) {
         w.move_to(*slid);
         winner_coarse = coarse_overlap(w.T);
       }
@@ -944,8 +954,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     // and the piece where nothing contradicts it: the winner's turns compete with it, and one
     // that fits about as well makes it ambiguous.
     auto& w = s.verified[*s.winner];
-    auto turns = turns_of(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, winner_coarse, scene_points,
-                          scene_tree, free_space, coarse, fine, params, res, passes, taken);
+    auto turns = turns_of(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, winner_coarse, fit, passes, taken);
     if (turns.better) {
       w.move_to(*turns.better);
       w.score = turns.better->coarse_score;
@@ -1050,7 +1059,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     const LibraryModel found_model = library_model(library, next->m);
     const auto slide = winner_slide(next->m);
     if (slide) {
-      if (const auto slid = evidence_slide(found_model, *slide, top.T, scene_points, scene_tree, free_space, fine, params, res, passes_of(next->m))) {
+      if (const auto slid = evidence_slide(found_model, *slide, top.T, fit, passes_of(next->m))) {
         top.move_to(*slid);
         next->gain = newly_explained(found_model.points, top.T);
       }
@@ -1114,12 +1123,11 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     if (slide && !found.ambiguous) {
       const double diameter = next->same->diameter();
       const double least = (1 - params.ambiguity_margin) * (top.icp.overlap_fraction - top.seen->free_space);
-      auto slides = slides_of(found_model, *slide, top.T, (1 - params.ambiguity_margin) * top.icp.overlap_fraction, scene_points, scene_tree,
-                              free_space, fine, params, res);
+      auto slides = slides_of(found_model, *slide, top.T, (1 - params.ambiguity_margin) * top.icp.overlap_fraction, fit);
       std::erase_if(slides, [&](const Slid& slid) { return slid.score < least || next->same->centre_distance(top.T, slid.T) < 0.1 * diameter; });
       std::stable_sort(slides.begin(), slides.end(), [](const Slid& a, const Slid& b) { return std::abs(a.shift) > std::abs(b.shift); });
       for (size_t k = 0; k < slides.size() && k < 3 && !found.ambiguous; ++k) {
-        const Moved moved = refined_from(found_model, slides[k].T, scene_points, scene_tree, free_space, fine, params, res, passes_of(next->m));
+        const Moved moved = refined_from(found_model, slides[k].T, fit, passes_of(next->m));
         const Transform& T = moved.icp.T_target_source;
         if (moved.passed && moved.icp.overlap_fraction - moved.seen.free_space >= least && next->same->centre_distance(top.T, T) >= 0.1 * diameter &&
             !on_accepted(found_model.points, T))
@@ -1183,9 +1191,10 @@ RecognitionCandidate check_pose(const TriangleMesh& scene, SpinImageLibrary& lib
   const KdTree3 scene_tree(scene_points.points, static_cast<float>(2.0 * res));
   const FreeSpace free_space = scene_free_space(scene_points, scene_tree, library, params);
   const LibraryModel model = library_model(library, model_index);
-  const IcpSettings fine = fine_icp(res);
-  const IcpResult icp = refine ? icp_point_to_plane(model.points, scene_points, scene_tree, T_scene_model, fine)
-                               : figures_at(model.points, T_scene_model, scene_points, scene_tree, fine);
+  const IcpSettings coarse = coarse_icp(res), fine = fine_icp(res);
+  const SceneFit fit{scene_points, scene_tree, free_space, coarse, fine, params, res};
+  const IcpResult icp =
+      refine ? icp_point_to_plane(model.points, scene_points, scene_tree, T_scene_model, fine) : figures_at(model.points, T_scene_model, fit);
   const FreeSpace::Check seen = free_space.check(model, icp.T_target_source);
   RecognitionCandidate c = candidate_of(model_index, icp.T_target_source, icp, &seen);
   const bool passed = meets_tests(icp, seen, params, res, {}, library.slides(model_index));
