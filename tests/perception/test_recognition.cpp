@@ -628,7 +628,7 @@ TEST(Recognition, TheSameDetectionsOnOneThreadAsOnTwo) {
     const auto &a = one.result.instances[k], &b = two.result.instances[k];
     EXPECT_EQ(a.model, b.model) << "instance " << k;
     EXPECT_LT((a.T_scene_model.translation() - b.T_scene_model.translation()).norm(), 1e-6) << "instance " << k << " (" << a.model << ")";
-    EXPECT_LT(Eigen::AngleAxisd(a.T_scene_model.linear().transpose() * b.T_scene_model.linear()).angle(), 1e-6) << "instance " << k;
+    EXPECT_LT(rotation_angle(a.T_scene_model.inverse() * b.T_scene_model), 1e-6) << "instance " << k;
   }
 }
 
