@@ -763,6 +763,16 @@ int main(int argc, char** argv) {
                     {"seconds_verify", result.seconds_verify},
                     {"seconds_hypotheses", result.seconds_hypotheses},
                     {"seconds_voting", result.seconds_voting}};
+    // Each detection's model and pose (T_scene_model, row by row, in metres): two runs compared
+    // pose by pose, not only by their counts.
+    json found_poses = json::array();
+    for (const auto& i : result.instances) {
+      std::vector<double> rows;
+      for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) rows.push_back(i.T_scene_model.matrix()(r, c));
+      found_poses.push_back({{"model", i.model}, {"T_scene_model", rows}});
+    }
+    scene_j["poses"] = found_poses;
     if (with_ppf) {
       // The scene at the detector's own sampling distance (the relative sampling step times the models' mean diameter),
       // as its authors do; every point pair within a model's diameter is voted on.

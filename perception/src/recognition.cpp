@@ -6,10 +6,12 @@
 #include <deque>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -394,6 +396,635 @@ std::optional<Moved> evidence_slide(const LibraryModel& model, const detail::Sli
   return *best;
 }
 
+// A coarse pose far from passing is refused without the fine ICP, which moves a pose by a
+// fraction of a resolution (on the clutter bench's first 12 scenes this screen let through all
+// 48 coarse poses that went on to pass, and stopped 482 of the 688 that failed).
+constexpr double kUnlimited = std::numeric_limits<double>::infinity();  // a slack that lifts its test
+constexpr Slack kPromising{.overlap = 0.5, .rmse = kUnlimited, .free_space = 2, .explained = 0.15, .planarity = 0.03, .continued = 3};
+// A screened pose whose coarse residual is more than this many times the limit is refused as
+// refined, without the fine ICP: in 50 scenes the coarse residual of the 219 poses that passed
+// after the fine ICP was at most 1.8 times the limit (1.2 mm), while 1,900 of the 2,283 fine
+// ICPs that failed began above 2.5 times it.
+constexpr double kRefinedRmse = 2.5;
+// Refused by a small margin on the visibility tests alone (a pose a few millimetres off
+// along a pipe's axis: its end in free space, or short of the seen end).
+constexpr Slack kNearPassing{.free_space = 2, .explained = 0.1, .continued = 3};
+// Fits the scene (overlap, residual), whatever the free-space and seen-surface tests say (the
+// plane, silhouette and through tests still hold).
+constexpr Slack kFitsOnly{.free_space = kUnlimited, .explained = kUnlimited};
+
+// One interpretation of the scene across all models: every model's next instance is searched
+// for (starting poses ranked, refined by ICP, verified); of those found, the one that explains
+// the most scene surface not yet explained is accepted and its surface marked explained; the
+// searches that acceptance affects are redone; until no model finds one more. A tee's run
+// "found" on a pipe explains less of it than the pipe does, so the pipe is accepted first, and
+// the tee's hypotheses there lose their support to it.
+class Interpretation {
+ public:
+  /// `no_votes`: the scene points that do not vote for poses (nor are fitted for cylinder axes).
+  Interpretation(const SceneFit& fit, SpinImageLibrary& library, const std::vector<char>& no_votes, RecognitionResult& result)
+      : fit_(fit), scene_(fit.scene), tree_(fit.scene_tree), params_(fit.params), res_(fit.res), library_(library), no_votes_(no_votes),
+        result_(result), explained_(fit.scene.points.size(), 0) {
+    grouping_.similarity_ratio = 0.0;  // the correlation threshold already filtered
+    grouping_.geometric_consistency = params_.geometric_consistency;
+    grouping_.gamma_m = params_.gamma_factor * res_;
+    grouping_.max_groups = params_.max_groups;
+    grouping_.max_candidates = params_.max_matches_grouped;
+  }
+
+  /// Each model's search begun with its spin-image matches (`per_model`) and its pose hypotheses.
+  void begin(std::vector<std::vector<detail::Correspondence>> per_model);
+  /// Instances accepted until no model finds one more (RecognitionResult::instances), and with
+  /// keep_candidates every pose tried or proposed (RecognitionResult::candidates).
+  void run();
+
+ private:
+  struct Verified {
+    Transform T;
+    IcpResult icp;
+    double score;
+    size_t size;
+    std::optional<FreeSpace::Check> seen;  ///< once screened or refined
+    PoseHypothesis* origin;                ///< the hypothesis it came from
+    /// Moved to a pose refined from it (slid along its axis, turned, or itself), and checked there
+    /// unless its ICP alone failed.
+    void move_to(const Moved& moved) {
+      icp = moved.icp;
+      T = moved.icp.T_target_source;
+      if (moved.checked) seen = moved.seen;
+      else seen.reset();
+    }
+  };
+  // A model's search for its next instance, kept between rounds.
+  struct Search {
+    size_t m = 0;
+    std::vector<detail::Correspondence> candidates;  ///< spin-image matches on surface not yet explained
+    size_t grouped = 0;  ///< how many candidates there were when last grouped (they are only ever removed)
+    detail::PairAgreements agreements;  ///< of the last grouping
+    /// pair and voting hypotheses, then the groups' poses as they come (a deque: Verified points into it)
+    std::deque<PoseHypothesis> hypotheses;
+    std::unique_ptr<SurfaceSupport> surface_support;
+    std::unique_ptr<SameSurface> same;
+    int instances = 0;
+    bool stale = true;                ///< to be searched (again)
+    std::vector<Verified> verified;   ///< of the last search, best first
+    std::optional<size_t> winner;     ///< into verified: the instance that search found
+    std::vector<size_t> gain;         ///< the scene points the winner explains that no accepted instance does
+    std::vector<IcpResult> coarse_poses;  ///< of the last search and the winner's turns, symmetric ones too: for the ambiguity test
+    /// Scene points that no longer support this model: explained by an accepted instance, or under
+    /// a pose of it refused because what it lies on is one plane or carries on past its outline.
+    std::vector<char> unusable;
+  };
+  // A starting pose: a hypothesis, and its support on the scene surface not yet explained.
+  struct Start {
+    size_t support;
+    PoseHypothesis* origin;
+  };
+
+  // The scene surface the model at T lies on: the scene points within 2 resolutions of it.
+  std::vector<size_t> lies_on(const PointCloud& model, const Transform& T_scene_model) const {
+    const Eigen::Isometry3f T = T_scene_model.cast<float>();
+    std::vector<size_t> near, out;
+    std::vector<char> counted(scene_.points.size(), 0);
+    for (const auto& p : model.points) {
+      tree_.within(T * p, static_cast<float>(2.0 * res_), near);
+      for (const size_t s : near)
+        if (!counted[s]) counted[s] = 1, out.push_back(s);
+    }
+    return out;
+  }
+  std::vector<size_t> newly_explained(const PointCloud& model, const Transform& T_scene_model) const {
+    auto on = lies_on(model, T_scene_model);
+    std::erase_if(on, [&](size_t s) { return explained_[s]; });
+    return on;
+  }
+  // A pose that lies on an accepted instance (the ICP brought it back there from a start on the
+  // surface around it, or it is another model fitted to part of it): more than
+  // max_shared_support of the scene surface it lies on is explained already.
+  bool on_accepted(const PointCloud& model, const Transform& T_scene_model) const {
+    if (result_.instances.empty()) return false;
+    const auto on = lies_on(model, T_scene_model);
+    const auto taken = std::count_if(on.begin(), on.end(), [&](size_t s) { return explained_[s]; });
+    return static_cast<double>(taken) > params_.max_shared_support * static_cast<double>(on.size());
+  }
+  // The tests for model m, and the unslackened ones.
+  bool meets(size_t m, const IcpResult& icp, const FreeSpace::Check& seen, const Slack& slack) const {
+    return meets_tests(icp, seen, params_, res_, slack, library_.slides(m));
+  }
+  auto passes_of(size_t m) const {
+    return [this, m](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(m, icp, seen, {}); };
+  }
+  // How a winning pose of model m is slid: along a pipe's axis, or (with bend_slides) by the
+  // model's own slide (an elbow about its bend); or not at all.
+  static detail::Slide along(const detail::ModelCylinder& c) { return detail::shift_along(c.point, c.direction, c.end - c.start); }
+  std::optional<detail::Slide> winner_slide(size_t m) const {
+    if (const auto* c = library_.cylinder(m)) return along(*c);
+    if (const auto* slide = library_.slide(m); slide && params_.bend_slides) return *slide;
+    return std::nullopt;
+  }
+  // How a refused pose of model m is slid: as a winner is, or else (with round_part_hypotheses)
+  // along its largest round part's axis (a flange's neck); or not at all.
+  std::optional<detail::Slide> refused_slide(size_t m) const {
+    if (auto slide = winner_slide(m)) return slide;
+    const auto& parts = library_.round_parts(m);
+    if (!params_.round_part_hypotheses || parts.empty()) return std::nullopt;
+    return along(parts.front());
+  }
+  // The scene's cylinder axes of a radius of the library's cylinder models, found once.
+  const std::vector<detail::SceneAxis>& scene_axes(double radius) {
+    for (const auto& [r, axes] : axes_of_radius_)
+      if (std::abs(r - radius) < 0.25 * res_) return axes;
+    return axes_of_radius_.emplace_back(radius, detail::scene_axes(scene_, tree_, radius, res_, no_votes_, params_.axis_min_points)).second;
+  }
+
+  void refused_on_plane(Search& s, const Transform& T_scene_model, const FreeSpace::Check& seen);
+  std::vector<Start> ranked_starts(Search& s, bool regroup);
+  void search(Search& s);
+  void refine_starts(Search& s);
+  void settle_winner(Search& s);
+  void record(const Search& s, bool accepted);
+  std::vector<char> gain_flags(const Search& s) const;
+  static size_t shared_gain(const std::vector<char>& flags, const Search& other);
+  Search* next_to_accept();
+  void accept(Search& next);
+  void mark_ambiguity(RecognizedInstance& found, const Search& next, const std::optional<detail::Slide>& slide) const;
+  void explain(Search& next);
+
+  const SceneFit& fit_;
+  const PointCloud& scene_;
+  const KdTree3& tree_;
+  const RecognitionParams& params_;
+  const double res_;
+  SpinImageLibrary& library_;
+  const std::vector<char>& no_votes_;
+  RecognitionResult& result_;
+  detail::GroupingParams grouping_;
+  std::vector<char> explained_;  ///< by an accepted instance
+  std::vector<Search> searches_;
+  std::vector<std::pair<double, std::vector<detail::SceneAxis>>> axes_of_radius_;
+};
+
+void Interpretation::begin(std::vector<std::vector<detail::Correspondence>> per_model) {
+  searches_.resize(library_.model_count());
+  for (size_t m = 0; m < searches_.size(); ++m) {
+    auto& s = searches_[m];
+    s.m = m;
+    s.candidates = std::move(per_model[m]);
+    s.unusable = explained_;
+    const PointCloud& model = library_.model_points(m);
+    s.surface_support = std::make_unique<SurfaceSupport>(model, params_.pair_score_points, scene_, tree_);
+    s.same = std::make_unique<SameSurface>(model, library_.model_tree(m));
+    auto made = detail::pair_hypotheses(model, scene_, *s.surface_support, s.candidates, res_, params_);
+    const auto t_voting = Clock::now();
+    auto voted = detail::voting_hypotheses(library_.pair_features(m), scene_, no_votes_, *s.surface_support, res_, params_);
+    result_.seconds_voting += since(t_voting);
+    made.insert(made.end(), std::make_move_iterator(voted.begin()), std::make_move_iterator(voted.end()));
+    if (const auto* cylinder = library_.cylinder(m); cylinder && params_.axis_hypotheses) {
+      auto on_axes = detail::axis_hypotheses(*cylinder, scene_axes(cylinder->radius), *s.surface_support, res_, params_);
+      made.insert(made.end(), std::make_move_iterator(on_axes.begin()), std::make_move_iterator(on_axes.end()));
+    }
+    for (auto& h : detail::best_distinct(std::move(made), *s.same, static_cast<size_t>(std::max(params_.pair_pool, 0)))) s.hypotheses.push_back(std::move(h));
+    // Round parts' hypotheses are ranked apart (ranked_starts), so none is crowded out of the pool.
+    if (params_.round_part_hypotheses)
+      for (const auto& part : library_.round_parts(m))
+        for (auto& h : detail::axis_hypotheses(part, scene_axes(part.radius), *s.surface_support, res_, params_, RecognitionCandidate::Source::round_part))
+          s.hypotheses.push_back(std::move(h));
+  }
+}
+
+// A pose whose check finds that what it lies on is one plane, or carries on past its outline
+// (refused for it; with drop_refused_planes): the scene surface under it, and when that is mostly
+// one plane, the plane as far as the model reaches, no longer support the model (its face would
+// slide or turn there).
+// (The continued surface counts here above max_continued_fraction for every model: a pose of a
+// part that does not slide refused between its own limit and that one keeps its surface.)
+void Interpretation::refused_on_plane(Search& s, const Transform& T_scene_model, const FreeSpace::Check& seen) {
+  if (!params_.drop_refused_planes || !(seen.planarity > params_.max_support_planarity || seen.continued > params_.max_continued_fraction)) return;
+  const double planarity = seen.planarity;
+  const auto on = lies_on(library_.model_points(s.m), T_scene_model);
+  for (const size_t p : on) s.unusable[p] = 1;
+  if (planarity < 0.85) return;
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (const size_t p : on) scatter += scene_.normals[p].cast<double>() * scene_.normals[p].cast<double>().transpose();
+  const Eigen::Vector3f n = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(scatter).eigenvectors().col(2).cast<float>();
+  Eigen::Vector3f centre = Eigen::Vector3f::Zero();
+  size_t in_plane = 0;
+  for (const size_t p : on)
+    if (std::abs(n.dot(scene_.normals[p])) > 0.9f) centre += scene_.points[p], ++in_plane;
+  if (in_plane == 0) return;
+  centre /= static_cast<float>(in_plane);
+  std::vector<size_t> near;
+  tree_.within(T_scene_model.translation().cast<float>(), static_cast<float>(s.same->diameter()), near);
+  for (const size_t p : near)
+    if (std::abs(n.dot(scene_.points[p] - centre)) < static_cast<float>(2 * res_) && std::abs(n.dot(scene_.normals[p])) > 0.9f) s.unusable[p] = 1;
+}
+
+// Starting poses: the groups' and the pair and voting hypotheses still open (one that lost half
+// its support to the surface accepted instances explain was on such an instance), ranked by
+// their support on the scene surface not yet explained (a cheap verification); the best of
+// each kind. With `regroup`, the spin-image matches are grouped again first.
+std::vector<Interpretation::Start> Interpretation::ranked_starts(Search& s, bool regroup) {
+  const PointCloud& model = library_.model_points(s.m);
+  // The same candidates group the same way: grouped again only when some were removed.
+  if (regroup && params_.group_hypotheses && s.candidates.size() >= 3 && s.candidates.size() != std::exchange(s.grouped, s.candidates.size()))
+    for (const auto& g : detail::group_correspondences(model, scene_, s.candidates, grouping_, &s.agreements).groups) {
+      const auto same = [&](const PoseHypothesis& h) { return h.T_scene_model.matrix() == g.T_target_source.matrix(); };
+      if (std::any_of(s.hypotheses.begin(), s.hypotheses.end(), same)) continue;
+      PoseHypothesis& h = s.hypotheses.emplace_back();
+      h.T_scene_model = g.T_target_source;
+      h.source = RecognitionCandidate::Source::grouping;
+      h.size = g.size;
+      h.lies_on = s.surface_support->lies_on(h.T_scene_model, 2.0 * res_);
+      h.first_support = SurfaceSupport::count(*h.lies_on, s.unusable);
+    }
+  // Groups are scored with a wider margin: their coarser first pose only the ICP brings onto the
+  // surface. What each lies on is found once (200 nearest-point queries, in parallel), then
+  // counted, and the hypotheses taken in order.
+#pragma omp parallel for schedule(dynamic, 8)
+  for (size_t k = 0; k < s.hypotheses.size(); ++k)
+    if (PoseHypothesis& h = s.hypotheses[k]; !h.done) {
+      if (!h.lies_on)
+        h.lies_on = s.surface_support->lies_on(h.T_scene_model, (h.source == RecognitionCandidate::Source::grouping ? 2.0 : 1.5) * res_);
+      h.support = SurfaceSupport::count(*h.lies_on, s.unusable);
+    }
+  std::vector<Start> groups, pairs, parts;
+  for (auto& h : s.hypotheses) {
+    if (h.done) continue;
+    if (2 * h.support < h.first_support) h.done = true;
+    else if (h.source == RecognitionCandidate::Source::grouping) groups.push_back({h.support, &h});
+    else (h.source == RecognitionCandidate::Source::round_part ? parts : pairs).push_back({h.support, &h});
+  }
+  // Groups, pair hypotheses and round parts' are ranked apart: the pairs were chosen for their
+  // support and would crowd out the groups; a flange's neck has less support than the flange's
+  // face on a box top.
+  const auto keep_best = [&](std::vector<Start>& v) {
+    std::stable_sort(v.begin(), v.end(), [](const Start& a, const Start& b) { return a.support > b.support; });
+    v.resize(std::min(v.size(), static_cast<size_t>(std::max(params_.coarse_refined, 0))));
+  };
+  keep_best(groups);
+  keep_best(pairs);
+  keep_best(parts);
+  groups.insert(groups.end(), pairs.begin(), pairs.end());
+  groups.insert(groups.end(), parts.begin(), parts.end());
+  return groups;
+}
+
+// A model's search for its next instance: its best starting poses refined, and the first that
+// passes settled against its rivals, slides and turns.
+void Interpretation::search(Search& s) {
+  s.verified.clear();
+  s.winner.reset();
+  s.coarse_poses.clear();
+  refine_starts(s);
+  if (s.winner) settle_winner(s);
+}
+
+// The best starting poses are refined by the coarse ICP; in score order, the first that passes
+// the fine ICP and the visibility tests wins (Search::winner).
+void Interpretation::refine_starts(Search& s) {
+  const LibraryModel model = library_model(library_, s.m);
+  const auto passes = passes_of(s.m);
+  const auto taken = [&](const Transform& T) { return on_accepted(model.points, T); };
+  int turned_refused = 0;
+  for (int round = 0; round < std::max(params_.search_rounds, 1) && !s.winner; ++round) {
+    std::vector<Verified> batch;
+    const auto starts = ranked_starts(s, round == 0);
+    // One coarse ICP per thread: each is too short (750 points) to share well.
+#pragma omp parallel for schedule(dynamic, 1)
+    for (size_t k = 0; k < starts.size(); ++k)
+      if (PoseHypothesis& h = *starts[k].origin; !h.coarse)
+        h.coarse = icp_point_to_plane(model.points, scene_, tree_, h.T_scene_model, fit_.coarse);
+    for (const auto& st : starts) {
+      PoseHypothesis& h = *st.origin;
+      const IcpResult& r = *h.coarse;
+      batch.push_back({r.T_target_source, r, coarse_score(r, res_), h.source == RecognitionCandidate::Source::grouping ? h.size : h.support,
+                       std::nullopt, &h});
+    }
+    if (batch.empty()) break;
+    std::sort(batch.begin(), batch.end(), [](const Verified& a, const Verified& b) { return a.score > b.score; });
+    // Poses the coarse ICP brought together (the model's surface within 2 resolutions of where a
+    // better one, or one of an earlier round, puts it) are refined once. All of them stay
+    // candidates for the ambiguity test.
+    for (const auto& v : batch) s.coarse_poses.push_back(v.icp);
+    const size_t first = s.verified.size();
+    for (auto& v : batch) {
+      const bool same = std::any_of(s.verified.begin(), s.verified.end(), [&](const Verified& d) { return (*s.same)(v.T, d.T, 2 * res_); });
+      if (same) v.origin->done = true;
+      else s.verified.push_back(std::move(v));
+    }
+    size_t refined = 0;
+    for (size_t k = first; k < s.verified.size() && refined < static_cast<size_t>(std::max(params_.max_candidates_verified, 0)); ++k) {
+      auto& v = s.verified[k];
+      v.origin->done = true;
+      // The screen's tests that need no check first: the overlap (the occlusion lowers what is
+      // required, down to the floor), then the share through a solid's face (the check's first
+      // measure). The silhouette is measured only for a pose that passes the screen's other tests.
+      if (!may_pass(v.icp, params_, res_, kPromising)) continue;
+      // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
+      // or turned on a box top) would be refused again: not refined.
+      if (params_.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res_, s.unusable) < (*s.surface_support)(v.T, 2.0 * res_, explained_)) continue;
+      const auto screened = [&](const FreeSpace::Check& rest) { return meets(s.m, v.icp, rest, kPromising); };
+      if (!meets(s.m, v.icp, v.seen.emplace(fit_.free_space.check(model, v.T, screened, params_.max_through_fraction)), kPromising)) continue;
+      ++refined;
+      if (v.icp.rmse_m > kRefinedRmse * params_.max_rmse_factor * res_) {
+        refused_on_plane(s, v.T, *v.seen);  // its coarse figures stand for the refined pose's (below)
+        continue;
+      }
+      v.icp = icp_point_to_plane(model.points, scene_, tree_, v.T, fit_.fine);
+      v.T = v.icp.T_target_source;
+      v.seen.emplace(fit_.free_space.check(model, v.T));
+      // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
+      // what keeps the pose from passing; so is a flange's along its neck's.
+      if (const auto slide = refused_slide(s.m); slide && !passes(v.icp, *v.seen) && meets(s.m, v.icp, *v.seen, kNearPassing))
+        if (auto slid = slid_along(model, *slide, v.T, fit_, passes))
+          v.move_to(*slid);
+      // A part the ICP fits to the scene (its overlap and residual pass) that the visibility tests
+      // refuse may lie at the right place turned wrong about its run: a tee's branch or a valve's
+      // stem where the sensor saw through it. Its turns are tried; one that passes takes its place
+      // when it leaves less than half of what the sensor should have seen of it hidden (on a part
+      // mostly hidden, a turn that puts the rest where nothing contradicts it proves little).
+      if (turned_refused < params_.refused_turns && !passes(v.icp, *v.seen) && meets(s.m, v.icp, *v.seen, kFitsOnly)) {
+        ++turned_refused;
+        constexpr double kAny = -std::numeric_limits<double>::infinity();
+        auto turns = turns_of(model, library_.turn_axes(s.m), v.T, kAny, kAny, fit_, passes, taken);
+        if (turns.better && turns.better->seen.occluded < 0.5) v.move_to(*turns.better);
+      }
+      const auto& seen = *v.seen;
+      refused_on_plane(s, v.T, seen);
+      if (!passes(v.icp, seen) || taken(v.T)) continue;
+      s.winner = k;
+      break;
+    }
+  }
+}
+
+// Poses at the winner's place that the coarse ICP put about as much of the model on the scene
+// with were never refined: the winner passed first. A valve turned about its run or a pipe slid
+// along its axis passes as well as the true pose; the best of those rivals that passes and
+// fits better (the model's share on the scene, less its share in free space) takes its place.
+// One that passes and loses may be a second instance beside the winner: with
+// losing_rivals_stay_open the next search tries it again. Then the winner is slid and turned.
+void Interpretation::settle_winner(Search& s) {
+  const LibraryModel model = library_model(library_, s.m);
+  const auto passes = passes_of(s.m);
+  const auto taken = [&](const Transform& T) { return on_accepted(model.points, T); };
+  const auto coarse_overlap = [&](const Transform& T) {
+    return icp_point_to_plane(model.points, scene_, tree_, T, fit_.coarse).overlap_fraction;
+  };
+  const size_t first_winner = *s.winner;
+  double winner_coarse = coarse_overlap(s.verified[first_winner].T);
+  if (params_.rivals > 0) {
+    const auto& w = s.verified[first_winner];
+    const double bar = winner_coarse - params_.rival_coarse_slack;
+    std::vector<size_t> rivals;
+    for (size_t k = *s.winner + 1; k < s.verified.size(); ++k)
+      if (s.verified[k].icp.overlap_fraction >= bar && s.same->centre_distance(s.verified[k].T, w.T) < 0.5 * s.same->diameter()) rivals.push_back(k);
+    std::stable_sort(rivals.begin(), rivals.end(),
+                     [&](size_t a, size_t b) { return s.verified[a].icp.overlap_fraction > s.verified[b].icp.overlap_fraction; });
+    rivals.resize(std::min(rivals.size(), static_cast<size_t>(params_.rivals)));
+    std::vector<char> ok(rivals.size(), 0);
+#pragma omp parallel for schedule(dynamic, 1)
+    for (size_t j = 0; j < rivals.size(); ++j) {
+      auto& v = s.verified[rivals[j]];
+      const Moved refined = refined_from(model, v.T, fit_, passes);
+      v.move_to(refined);
+      ok[j] = refined.passed;
+    }
+    double to_beat = w.icp.overlap_fraction - w.seen->free_space + params_.rival_margin;
+    for (size_t j = 0; j < rivals.size(); ++j) {
+      if (!ok[j]) continue;
+      const auto& v = s.verified[rivals[j]];
+      const double score = v.icp.overlap_fraction - v.seen->free_space;
+      if (score > to_beat && !taken(v.T)) to_beat = score, s.winner = rivals[j];
+    }
+    // The rivals tried are closed, but for one that passes and loses (losing_rivals_stay_open).
+    for (size_t j = 0; j < rivals.size(); ++j)
+      s.verified[rivals[j]].origin->done = !(params_.losing_rivals_stay_open && ok[j] && rivals[j] != *s.winner);
+    if (*s.winner != first_winner) winner_coarse = coarse_overlap(s.verified[*s.winner].T);
+  }
+  if (const auto slide = winner_slide(s.m)) {
+    auto& w = s.verified[*s.winner];
+    if (auto slid = best_slide(model, *slide, w.T, w.icp.overlap_fraction, w.icp.overlap_fraction - w.seen->free_space, fit_, passes, taken)) {
+      w.move_to(*slid);
+      winner_coarse = coarse_overlap(w.T);
+    }
+  }
+  // A part whose distinguishing piece is small (a valve's stem and hand wheel, a tee's branch)
+  // also fits the scene with its large, nearly symmetric body (the run) turned about its axis
+  // and the piece where nothing contradicts it: the winner's turns compete with it, and one
+  // that fits about as well makes it ambiguous.
+  auto& w = s.verified[*s.winner];
+  auto turns = turns_of(model, library_.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, winner_coarse, fit_, passes, taken);
+  if (turns.better) {
+    w.move_to(*turns.better);
+    w.score = turns.better->coarse_score;
+  }
+  s.coarse_poses.insert(s.coarse_poses.end(), turns.coarse.begin(), turns.coarse.end());
+  s.gain = newly_explained(model.points, w.T);
+}
+
+// The last search's poses, for diagnosis (`accepted`: its winner was).
+void Interpretation::record(const Search& s, bool accepted) {
+  if (!params_.keep_candidates) return;
+  for (size_t k = 0; k < s.verified.size(); ++k) {
+    const auto& v = s.verified[k];
+    RecognitionCandidate c = candidate_of(s.m, v.T, v.icp, v.seen ? &*v.seen : nullptr);
+    c.correspondences = v.size;
+    c.source = v.origin->source;
+    c.stage = accepted && s.winner == k ? RecognitionCandidate::Stage::accepted
+              : v.seen                   ? RecognitionCandidate::Stage::refused
+                                         : RecognitionCandidate::Stage::coarse;
+    result_.candidates.push_back(c);
+  }
+}
+
+void Interpretation::run() {
+  while (true) {
+    for (auto& s : searches_)
+      if (s.stale && s.instances < params_.max_instances) {
+        record(s, false);
+        search(s);
+        s.stale = false;
+      }
+    Search* next = next_to_accept();
+    if (!next) break;
+    accept(*next);
+  }
+  for (const auto& s : searches_) {
+    record(s, false);
+    if (params_.keep_candidates)
+      for (const auto& h : s.hypotheses)
+        if (!h.coarse && h.source != RecognitionCandidate::Source::grouping) {
+          RecognitionCandidate c;
+          c.model_index = s.m;
+          c.T_scene_model = h.T_scene_model;
+          c.correspondences = h.first_support;
+          c.source = h.source;
+          c.stage = RecognitionCandidate::Stage::proposed;
+          result_.candidates.push_back(c);
+        }
+  }
+}
+
+// The scene points a search's winner newly explains, flagged; and how many of another's are among them.
+std::vector<char> Interpretation::gain_flags(const Search& s) const {
+  std::vector<char> flags(scene_.points.size(), 0);
+  for (const size_t p : s.gain) flags[p] = 1;
+  return flags;
+}
+size_t Interpretation::shared_gain(const std::vector<char>& flags, const Search& other) {
+  return static_cast<size_t>(std::count_if(other.gain.begin(), other.gain.end(), [&](size_t p) { return flags[p] != 0; }));
+}
+
+// The search whose winner explains the most scene surface not yet explained, or none. Another
+// model's winner that this one's acceptance would refuse and whose acceptance would refuse this
+// one is the other reading of the same object: the one the evidence is less against is accepted.
+Interpretation::Search* Interpretation::next_to_accept() {
+  Search* next = nullptr;
+  for (auto& s : searches_)
+    if (s.winner && s.instances < params_.max_instances && (!next || s.gain.size() > next->gain.size())) next = &s;
+  if (!next || params_.conflict_margin < 0) return next;
+  const auto against = [](const Search& s) {
+    const auto& seen = *s.verified[*s.winner].seen;
+    return seen.free_space + (1 - seen.explained);
+  };
+  const auto gained = gain_flags(*next);
+  Search* better = next;
+  for (auto& other : searches_) {
+    if (&other == next || !other.winner || other.instances >= params_.max_instances) continue;
+    const auto shared = static_cast<double>(shared_gain(gained, other));
+    if (shared <= params_.max_shared_support * static_cast<double>(other.gain.size()) ||
+        shared <= params_.max_shared_support * static_cast<double>(next->gain.size()))
+      continue;
+    if (against(other) + params_.conflict_margin < against(*better)) better = &other;
+  }
+  return better;
+}
+
+// The search's winner accepted as an instance (slid first where the evidence places it better),
+// its ambiguities found, and the scene surface it explains marked.
+void Interpretation::accept(Search& next) {
+  record(next, true);
+  auto& verified = next.verified;
+  if (*next.winner != 0) std::swap(verified[*next.winner], verified.front());
+  auto& top = verified.front();
+  const LibraryModel found_model = library_model(library_, next.m);
+  const auto slide = winner_slide(next.m);
+  if (slide) {
+    if (const auto slid = evidence_slide(found_model, *slide, top.T, fit_, passes_of(next.m))) {
+      top.move_to(*slid);
+      next.gain = newly_explained(found_model.points, top.T);
+    }
+  }
+  RecognizedInstance found;
+  found.model = library_.model_name(next.m);
+  found.model_index = next.m;
+  found.T_scene_model = top.T;
+  found.overlap_fraction = top.icp.overlap_fraction;
+  found.rmse_m = top.icp.rmse_m;
+  found.score = top.score;
+  found.correspondences = top.size;
+  found.free_space_fraction = top.seen->free_space;
+  found.visible_explained = top.seen->explained;
+  found.occluded_fraction = top.seen->occluded;
+  found.continued_fraction = top.seen->continued;
+  mark_ambiguity(found, next, slide);
+  result_.instances.push_back(found);
+  explain(next);
+}
+
+// Whether the accepted winner of `next` (its first verified pose) is ambiguous, and with what.
+void Interpretation::mark_ambiguity(RecognizedInstance& found, const Search& next, const std::optional<detail::Slide>& slide) const {
+  const auto& top = next.verified.front();
+  const LibraryModel found_model = library_model(library_, next.m);
+  const auto ambiguous_with = [&](size_t m, const Transform& T) {
+    found.ambiguous = true;
+    found.alternative_model = library_.model_name(m);
+    found.alternative_model_index = m;
+    found.T_scene_model_alternative = T;
+  };
+  // Ambiguous with another model: its search's winner (which passes the tests and lies on no
+  // accepted instance) explains nearly all of the scene surface this one newly explains; the one
+  // that explains most of it. A tee whose branch is hidden and a pipe on its run are told apart
+  // by nothing the sensor saw.
+  {
+    const auto gained = gain_flags(next);
+    size_t most = 0;
+    for (const auto& other : searches_) {
+      if (&other == &next || !other.winner) continue;
+      const size_t shared = shared_gain(gained, other);
+      if (shared <= most || static_cast<double>(shared) < (1 - params_.ambiguity_margin) * static_cast<double>(next.gain.size())) continue;
+      most = shared;
+      ambiguous_with(other.m, other.verified[*other.winner].T);
+    }
+  }
+  // Ambiguous, failing that: another pose at the same place that puts the model's surface
+  // elsewhere (not a turn about the part's own symmetry) puts nearly as much of the model on the
+  // scene (coarse ICP overlap) and passes the tests too; the best of the first three such.
+  if (!found.ambiguous) {
+    const double overlap = icp_point_to_plane(found_model.points, scene_, tree_, top.T, fit_.coarse).overlap_fraction;
+    std::vector<const IcpResult*> rivals;
+    for (const auto& other : next.coarse_poses) {
+      const Transform& T = other.T_target_source;
+      if (other.overlap_fraction >= (1 - params_.ambiguity_margin) * overlap && other.rmse_m <= params_.max_rmse_factor * res_ &&
+          next.same->centre_distance(top.T, T) < 0.1 * next.same->diameter() && !(*next.same)(top.T, T, 0.1 * next.same->diameter()))
+        rivals.push_back(&other);
+    }
+    std::stable_sort(rivals.begin(), rivals.end(), [](const IcpResult* a, const IcpResult* b) { return a->overlap_fraction > b->overlap_fraction; });
+    for (size_t k = 0; k < rivals.size() && k < 3 && !found.ambiguous; ++k) {
+      const Transform& T = rivals[k]->T_target_source;
+      if (passes_of(next.m)(*rivals[k], fit_.free_space.check(found_model, T)) && !on_accepted(found_model.points, T)) ambiguous_with(next.m, T);
+    }
+  }
+  // Ambiguous, failing that: the model slid along itself (a pipe along its run, an elbow about
+  // its bend) by more than a tenth of its diameter puts nearly as much of it on the scene, less
+  // its share in free space (ambiguity_margin), and passes the tests there, refined: where both
+  // of a pipe's ends are hidden, nothing the sensor saw places it along the run. Of the first
+  // three such slides, farthest first, the first that passes: how far its place is open.
+  if (slide && !found.ambiguous) {
+    const double diameter = next.same->diameter();
+    const double least = (1 - params_.ambiguity_margin) * (top.icp.overlap_fraction - top.seen->free_space);
+    auto slides = slides_of(found_model, *slide, top.T, (1 - params_.ambiguity_margin) * top.icp.overlap_fraction, fit_);
+    std::erase_if(slides, [&](const Slid& slid) { return slid.score < least || next.same->centre_distance(top.T, slid.T) < 0.1 * diameter; });
+    std::stable_sort(slides.begin(), slides.end(), [](const Slid& a, const Slid& b) { return std::abs(a.shift) > std::abs(b.shift); });
+    for (size_t k = 0; k < slides.size() && k < 3 && !found.ambiguous; ++k) {
+      const Moved moved = refined_from(found_model, slides[k].T, fit_, passes_of(next.m));
+      const Transform& T = moved.icp.T_target_source;
+      if (moved.passed && moved.icp.overlap_fraction - moved.seen.free_space >= least && next.same->centre_distance(top.T, T) >= 0.1 * diameter &&
+          !on_accepted(found_model.points, T))
+        ambiguous_with(next.m, T);
+    }
+  }
+}
+
+// The scene surface the accepted winner of `next` newly explains marked. It no longer supports
+// other instances: another model's instance found on it is refused; one that lost scene surface
+// to it explains less; a search whose starting poses lost support to it would now rank others
+// among its best.
+void Interpretation::explain(Search& next) {
+  for (const size_t p : next.gain) {
+    explained_[p] = 1;
+    for (auto& s : searches_) s.unusable[p] = 1;
+  }
+  ++next.instances;
+  next.verified.clear();
+  next.winner.reset();
+  next.stale = true;
+  for (auto& s : searches_) {
+    std::erase_if(s.candidates, [&](const detail::Correspondence& c) { return explained_[c.target]; });
+    if (s.stale) continue;
+    const PointCloud& other = library_.model_points(s.m);
+    if (s.winner) {
+      if (on_accepted(other, s.verified[*s.winner].T)) s.stale = true;
+      else s.gain = newly_explained(other, s.verified[*s.winner].T);
+    } else {
+      // Searched again only when a starting pose not refined yet is now among the best.
+      const auto starts = ranked_starts(s, false);
+      s.stale = std::any_of(starts.begin(), starts.end(), [](const Start& st) { return !st.origin->coarse; });
+    }
+  }
+}
+
 }  // namespace
 
 struct SpinImageLibrary::SearchIndex {
@@ -619,12 +1250,7 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
     }
   result.seconds_search = since(t0);
 
-  // One interpretation of the scene across all models: every model's next instance is searched
-  // for (starting poses ranked, refined by ICP, verified); of those found, the one that explains
-  // the most scene surface not yet explained is accepted and its surface marked explained; the
-  // searches that acceptance affects are redone; until no model finds one more. A tee's run
-  // "found" on a pipe explains less of it than the pipe does, so the pipe is accepted first, and
-  // the tee's hypotheses there lose their support to it.
+  // One interpretation of the scene across all models (Interpretation).
   t0 = Clock::now();
   const FreeSpace free_space = scene_free_space(scene_points, scene_tree, library, params);
   // Scene points that do not vote (neither as reference points nor as partners): those on a
@@ -634,546 +1260,10 @@ RecognitionResult recognize(const TriangleMesh& scene, SpinImageLibrary& library
   const std::vector<char>& no_votes = params.no_votes_on_support ? free_space.support() : free_space.background();
   const IcpSettings coarse = coarse_icp(res), fine = fine_icp(res);
   const SceneFit fit{scene_points, scene_tree, free_space, coarse, fine, params, res};
-  detail::GroupingParams grouping;
-  grouping.similarity_ratio = 0.0;  // the correlation threshold already filtered
-  grouping.geometric_consistency = params.geometric_consistency;
-  grouping.gamma_m = params.gamma_factor * res;
-  grouping.max_groups = params.max_groups;
-  grouping.max_candidates = params.max_matches_grouped;
-  std::vector<char> explained(scene_points.points.size(), 0);  // by an accepted instance
-  // The scene surface the model at T lies on: the scene points within 2 resolutions of it.
-  const auto lies_on = [&](const PointCloud& model, const Transform& T_scene_model) {
-    const Eigen::Isometry3f T = T_scene_model.cast<float>();
-    std::vector<size_t> near, out;
-    std::vector<char> counted(scene_points.points.size(), 0);
-    for (const auto& p : model.points) {
-      scene_tree.within(T * p, static_cast<float>(2.0 * res), near);
-      for (const size_t s : near)
-        if (!counted[s]) counted[s] = 1, out.push_back(s);
-    }
-    return out;
-  };
-  const auto newly_explained = [&](const PointCloud& model, const Transform& T_scene_model) {
-    auto on = lies_on(model, T_scene_model);
-    std::erase_if(on, [&](size_t s) { return explained[s]; });
-    return on;
-  };
-  // A pose that lies on an accepted instance (the ICP brought it back there from a start on the
-  // surface around it, or it is another model fitted to part of it): more than
-  // max_shared_support of the scene surface it lies on is explained already.
-  const auto on_accepted = [&](const PointCloud& model, const Transform& T_scene_model) {
-    if (result.instances.empty()) return false;
-    const auto on = lies_on(model, T_scene_model);
-    const auto taken = std::count_if(on.begin(), on.end(), [&](size_t s) { return explained[s]; });
-    return static_cast<double>(taken) > params.max_shared_support * static_cast<double>(on.size());
-  };
-  // The tests for model m, and the unslackened ones.
-  const auto meets = [&](size_t m, const IcpResult& icp, const FreeSpace::Check& seen, const Slack& slack) {
-    return meets_tests(icp, seen, params, res, slack, library.slides(m));
-  };
-  const auto passes_of = [&](size_t m) {
-    return [&meets, m](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(m, icp, seen, {}); };
-  };
-  // A coarse pose far from passing is refused without the fine ICP, which moves a pose by a
-  // fraction of a resolution (on the clutter bench's first 12 scenes this screen let through all
-  // 48 coarse poses that went on to pass, and stopped 482 of the 688 that failed).
-  constexpr double kUnlimited = std::numeric_limits<double>::infinity();  // a slack that lifts its test
-  const Slack promising{.overlap = 0.5, .rmse = kUnlimited, .free_space = 2, .explained = 0.15, .planarity = 0.03, .continued = 3};
-  // A screened pose whose coarse residual is more than this many times the limit is refused as
-  // refined, without the fine ICP: in 50 scenes the coarse residual of the 219 poses that passed
-  // after the fine ICP was at most 1.8 times the limit (1.2 mm), while 1,900 of the 2,283 fine
-  // ICPs that failed began above 2.5 times it.
-  constexpr double kRefinedRmse = 2.5;
-  // Refused by a small margin on the visibility tests alone (a pose a few millimetres off
-  // along a pipe's axis: its end in free space, or short of the seen end).
-  const Slack near_passing{.free_space = 2, .explained = 0.1, .continued = 3};
-  // Fits the scene (overlap, residual), whatever the free-space and seen-surface tests say (the
-  // plane, silhouette and through tests still hold).
-  const Slack fits_only{.free_space = kUnlimited, .explained = kUnlimited};
-  struct Verified {
-    Transform T;
-    IcpResult icp;
-    double score;
-    size_t size;
-    std::optional<FreeSpace::Check> seen;  ///< once screened or refined
-    PoseHypothesis* origin;                ///< the hypothesis it came from
-    /// Moved to a pose refined from it (slid along its axis, turned, or itself), and checked there
-    /// unless its ICP alone failed.
-    void move_to(const Moved& moved) {
-      icp = moved.icp;
-      T = moved.icp.T_target_source;
-      if (moved.checked) seen = moved.seen;
-      else seen.reset();
-    }
-  };
-  // A model's search for its next instance, kept between rounds.
-  struct Search {
-    size_t m = 0;
-    std::vector<detail::Correspondence> candidates;  ///< spin-image matches on surface not yet explained
-    size_t grouped = 0;  ///< how many candidates there were when last grouped (they are only ever removed)
-    detail::PairAgreements agreements;  ///< of the last grouping
-    /// pair and voting hypotheses, then the groups' poses as they come (a deque: Verified points into it)
-    std::deque<PoseHypothesis> hypotheses;
-    std::unique_ptr<SurfaceSupport> surface_support;
-    std::unique_ptr<SameSurface> same;
-    int instances = 0;
-    bool stale = true;                ///< to be searched (again)
-    std::vector<Verified> verified;   ///< of the last search, best first
-    std::optional<size_t> winner;     ///< into verified: the instance that search found
-    std::vector<size_t> gain;         ///< the scene points the winner explains that no accepted instance does
-    std::vector<IcpResult> coarse_poses;  ///< of the last search and the winner's turns, symmetric ones too: for the ambiguity test
-    /// Scene points that no longer support this model: explained by an accepted instance, or under
-    /// a pose of it refused because what it lies on is one plane or carries on past its outline.
-    std::vector<char> unusable;
-  };
-  // A pose whose check finds that what it lies on is one plane, or carries on past its outline
-  // (refused for it; with drop_refused_planes): the scene surface under it, and when that is mostly
-  // one plane, the plane as far as the model reaches, no longer support the model (its face would
-  // slide or turn there).
-  // (The continued surface counts here above max_continued_fraction for every model: a pose of a
-  // part that does not slide refused between its own limit and that one keeps its surface.)
-  const auto refused_on_plane = [&](Search& s, const Transform& T_scene_model, const FreeSpace::Check& seen) {
-    if (!params.drop_refused_planes || !(seen.planarity > params.max_support_planarity || seen.continued > params.max_continued_fraction)) return;
-    const double planarity = seen.planarity;
-    const auto on = lies_on(library.model_points(s.m), T_scene_model);
-    for (const size_t p : on) s.unusable[p] = 1;
-    if (planarity < 0.85) return;
-    Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-    for (const size_t p : on) scatter += scene_points.normals[p].cast<double>() * scene_points.normals[p].cast<double>().transpose();
-    const Eigen::Vector3f n = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(scatter).eigenvectors().col(2).cast<float>();
-    Eigen::Vector3f centre = Eigen::Vector3f::Zero();
-    size_t in_plane = 0;
-    for (const size_t p : on)
-      if (std::abs(n.dot(scene_points.normals[p])) > 0.9f) centre += scene_points.points[p], ++in_plane;
-    if (in_plane == 0) return;
-    centre /= static_cast<float>(in_plane);
-    std::vector<size_t> near;
-    scene_tree.within(T_scene_model.translation().cast<float>(), static_cast<float>(s.same->diameter()), near);
-    for (const size_t p : near)
-      if (std::abs(n.dot(scene_points.points[p] - centre)) < static_cast<float>(2 * res) && std::abs(n.dot(scene_points.normals[p])) > 0.9f) s.unusable[p] = 1;
-  };
-  // Starting poses: the groups' and the pair and voting hypotheses still open (one that lost half
-  // its support to the surface accepted instances explain was on such an instance), ranked by
-  // their support on the scene surface not yet explained (a cheap verification); the best of
-  // each kind. With `regroup`, the spin-image matches are grouped again first.
-  struct Start {
-    size_t support;
-    PoseHypothesis* origin;
-  };
-  const auto ranked_starts = [&](Search& s, bool regroup) {
-    const PointCloud& model = library.model_points(s.m);
-    // The same candidates group the same way: grouped again only when some were removed.
-    if (regroup && params.group_hypotheses && s.candidates.size() >= 3 && s.candidates.size() != std::exchange(s.grouped, s.candidates.size()))
-      for (const auto& g : detail::group_correspondences(model, scene_points, s.candidates, grouping, &s.agreements).groups) {
-        const auto same = [&](const PoseHypothesis& h) { return h.T_scene_model.matrix() == g.T_target_source.matrix(); };
-        if (std::any_of(s.hypotheses.begin(), s.hypotheses.end(), same)) continue;
-        PoseHypothesis& h = s.hypotheses.emplace_back();
-        h.T_scene_model = g.T_target_source;
-        h.source = RecognitionCandidate::Source::grouping;
-        h.size = g.size;
-        h.lies_on = s.surface_support->lies_on(h.T_scene_model, 2.0 * res);
-        h.first_support = SurfaceSupport::count(*h.lies_on, s.unusable);
-      }
-    // Groups are scored with a wider margin: their coarser first pose only the ICP brings onto the
-    // surface. What each lies on is found once (200 nearest-point queries, in parallel), then
-    // counted, and the hypotheses taken in order.
-#pragma omp parallel for schedule(dynamic, 8)
-    for (size_t k = 0; k < s.hypotheses.size(); ++k)
-      if (PoseHypothesis& h = s.hypotheses[k]; !h.done) {
-        if (!h.lies_on)
-          h.lies_on = s.surface_support->lies_on(h.T_scene_model, (h.source == RecognitionCandidate::Source::grouping ? 2.0 : 1.5) * res);
-        h.support = SurfaceSupport::count(*h.lies_on, s.unusable);
-      }
-    std::vector<Start> groups, pairs, parts;
-    for (auto& h : s.hypotheses) {
-      if (h.done) continue;
-      if (2 * h.support < h.first_support) h.done = true;
-      else if (h.source == RecognitionCandidate::Source::grouping) groups.push_back({h.support, &h});
-      else (h.source == RecognitionCandidate::Source::round_part ? parts : pairs).push_back({h.support, &h});
-    }
-    // Groups, pair hypotheses and round parts' are ranked apart: the pairs were chosen for their
-    // support and would crowd out the groups; a flange's neck has less support than the flange's
-    // face on a box top.
-    const auto keep_best = [&](std::vector<Start>& v) {
-      std::stable_sort(v.begin(), v.end(), [](const Start& a, const Start& b) { return a.support > b.support; });
-      v.resize(std::min(v.size(), static_cast<size_t>(std::max(params.coarse_refined, 0))));
-    };
-    keep_best(groups);
-    keep_best(pairs);
-    keep_best(parts);
-    groups.insert(groups.end(), pairs.begin(), pairs.end());
-    groups.insert(groups.end(), parts.begin(), parts.end());
-    return groups;
-  };
-  // How a winning pose of model m is slid: along a pipe's axis, or (with bend_slides) by the
-  // model's own slide (an elbow about its bend); or not at all.
-  const auto along = [](const detail::ModelCylinder& c) { return detail::shift_along(c.point, c.direction, c.end - c.start); };
-  const auto winner_slide = [&](size_t m) -> std::optional<detail::Slide> {
-    if (const auto* c = library.cylinder(m)) return along(*c);
-    if (const auto* slide = library.slide(m); slide && params.bend_slides) return *slide;
-    return std::nullopt;
-  };
-  // How a refused pose of model m is slid: as a winner is, or else (with round_part_hypotheses)
-  // along its largest round part's axis (a flange's neck); or not at all.
-  const auto refused_slide = [&](size_t m) -> std::optional<detail::Slide> {
-    if (auto slide = winner_slide(m)) return slide;
-    const auto& parts = library.round_parts(m);
-    if (!params.round_part_hypotheses || parts.empty()) return std::nullopt;
-    return along(parts.front());
-  };
-  // The best starting poses are refined by the coarse ICP; in score order, the first that passes
-  // the fine ICP and the visibility tests wins.
-  const auto search = [&](Search& s) {
-    const LibraryModel model = library_model(library, s.m);
-    const auto passes = passes_of(s.m);
-    s.verified.clear();
-    s.winner.reset();
-    s.coarse_poses.clear();
-    const auto taken = [&](const Transform& T) { return on_accepted(model.points, T); };
-    int turned_refused = 0;
-    for (int round = 0; round < std::max(params.search_rounds, 1) && !s.winner; ++round) {
-      std::vector<Verified> batch;
-      const auto starts = ranked_starts(s, round == 0);
-      // One coarse ICP per thread: each is too short (750 points) to share well.
-#pragma omp parallel for schedule(dynamic, 1)
-      for (size_t k = 0; k < starts.size(); ++k)
-        if (PoseHypothesis& h = *starts[k].origin; !h.coarse)
-          h.coarse = icp_point_to_plane(model.points, scene_points, scene_tree, h.T_scene_model, coarse);
-      for (const auto& st : starts) {
-        PoseHypothesis& h = *st.origin;
-        const IcpResult& r = *h.coarse;
-        batch.push_back({r.T_target_source, r, coarse_score(r, res), h.source == RecognitionCandidate::Source::grouping ? h.size : h.support,
-                         std::nullopt, &h});
-      }
-      if (batch.empty()) break;
-      std::sort(batch.begin(), batch.end(), [](const Verified& a, const Verified& b) { return a.score > b.score; });
-      // Poses the coarse ICP brought together (the model's surface within 2 resolutions of where a
-      // better one, or one of an earlier round, puts it) are refined once. All of them stay
-      // candidates for the ambiguity test.
-      for (const auto& v : batch) s.coarse_poses.push_back(v.icp);
-      const size_t first = s.verified.size();
-      for (auto& v : batch) {
-        const bool same = std::any_of(s.verified.begin(), s.verified.end(), [&](const Verified& d) { return (*s.same)(v.T, d.T, 2 * res); });
-        if (same) v.origin->done = true;
-        else s.verified.push_back(std::move(v));
-      }
-      size_t refined = 0;
-      for (size_t k = first; k < s.verified.size() && refined < static_cast<size_t>(std::max(params.max_candidates_verified, 0)); ++k) {
-        auto& v = s.verified[k];
-        v.origin->done = true;
-        // The screen's tests that need no check first: the overlap (the occlusion lowers what is
-        // required, down to the floor), then the share through a solid's face (the check's first
-        // measure). The silhouette is measured only for a pose that passes the screen's other tests.
-        if (!may_pass(v.icp, params, res, promising)) continue;
-        // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
-        // or turned on a box top) would be refused again: not refined.
-        if (params.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res, s.unusable) < (*s.surface_support)(v.T, 2.0 * res, explained)) continue;
-        const auto screened = [&](const FreeSpace::Check& rest) { return meets(s.m, v.icp, rest, promising); };
-        if (!meets(s.m, v.icp, v.seen.emplace(free_space.check(model, v.T, screened, params.max_through_fraction)), promising)) continue;
-        ++refined;
-        if (v.icp.rmse_m > kRefinedRmse * params.max_rmse_factor * res) {
-          refused_on_plane(s, v.T, *v.seen);  // its coarse figures stand for the refined pose's (below)
-          continue;
-        }
-        v.icp = icp_point_to_plane(model.points, scene_points, scene_tree, v.T, fine);
-        v.T = v.icp.T_target_source;
-        v.seen.emplace(free_space.check(model, v.T));
-        // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
-        // what keeps the pose from passing; so is a flange's along its neck's.
-        if (const auto slide = refused_slide(s.m); slide && !passes(v.icp, *v.seen) && meets(s.m, v.icp, *v.seen, near_passing))
-          if (auto slid = slid_along(model, *slide, v.T, fit, passes))
-            v.move_to(*slid);
-        // A part the ICP fits to the scene (its overlap and residual pass) that the visibility tests
-        // refuse may lie at the right place turned wrong about its run: a tee's branch or a valve's
-        // stem where the sensor saw through it. Its turns are tried; one that passes takes its place
-        // when it leaves less than half of what the sensor should have seen of it hidden (on a part
-        // mostly hidden, a turn that puts the rest where nothing contradicts it proves little).
-        if (turned_refused < params.refused_turns && !passes(v.icp, *v.seen) && meets(s.m, v.icp, *v.seen, fits_only)) {
-          ++turned_refused;
-          constexpr double kAny = -std::numeric_limits<double>::infinity();
-          auto turns = turns_of(model, library.turn_axes(s.m), v.T, kAny, kAny, fit, passes, taken);
-          if (turns.better && turns.better->seen.occluded < 0.5) v.move_to(*turns.better);
-        }
-        const auto& seen = *v.seen;
-        refused_on_plane(s, v.T, seen);
-        if (!passes(v.icp, seen) || taken(v.T)) continue;
-        s.winner = k;
-        break;
-      }
-    }
-    if (!s.winner) return;
-    // Poses at the winner's place that the coarse ICP put about as much of the model on the scene
-    // with were never refined: the winner passed first. A valve turned about its run or a pipe slid
-    // along its axis passes as well as the true pose; the best of those rivals that passes and
-    // fits better (the model's share on the scene, less its share in free space) takes its place.
-    // One that passes and loses may be a second instance beside the winner: with
-    // losing_rivals_stay_open the next search tries it again.
-    const auto coarse_overlap = [&](const Transform& T) {
-      return icp_point_to_plane(model.points, scene_points, scene_tree, T, coarse).overlap_fraction;
-    };
-    const size_t first_winner = *s.winner;
-    double winner_coarse = coarse_overlap(s.verified[first_winner].T);
-    if (params.rivals > 0) {
-      const auto& w = s.verified[first_winner];
-      const double bar = winner_coarse - params.rival_coarse_slack;
-      std::vector<size_t> rivals;
-      for (size_t k = *s.winner + 1; k < s.verified.size(); ++k)
-        if (s.verified[k].icp.overlap_fraction >= bar && s.same->centre_distance(s.verified[k].T, w.T) < 0.5 * s.same->diameter()) rivals.push_back(k);
-      std::stable_sort(rivals.begin(), rivals.end(),
-                       [&](size_t a, size_t b) { return s.verified[a].icp.overlap_fraction > s.verified[b].icp.overlap_fraction; });
-      rivals.resize(std::min(rivals.size(), static_cast<size_t>(params.rivals)));
-      std::vector<char> ok(rivals.size(), 0);
-#pragma omp parallel for schedule(dynamic, 1)
-      for (size_t j = 0; j < rivals.size(); ++j) {
-        auto& v = s.verified[rivals[j]];
-        const Moved refined = refined_from(model, v.T, fit, passes);
-        v.move_to(refined);
-        ok[j] = refined.passed;
-      }
-      double to_beat = w.icp.overlap_fraction - w.seen->free_space + params.rival_margin;
-      for (size_t j = 0; j < rivals.size(); ++j) {
-        if (!ok[j]) continue;
-        const auto& v = s.verified[rivals[j]];
-        const double score = v.icp.overlap_fraction - v.seen->free_space;
-        if (score > to_beat && !taken(v.T)) to_beat = score, s.winner = rivals[j];
-      }
-      // The rivals tried are closed, but for one that passes and loses (losing_rivals_stay_open).
-      for (size_t j = 0; j < rivals.size(); ++j)
-        s.verified[rivals[j]].origin->done = !(params.losing_rivals_stay_open && ok[j] && rivals[j] != *s.winner);
-      if (*s.winner != first_winner) winner_coarse = coarse_overlap(s.verified[*s.winner].T);
-    }
-    if (const auto slide = winner_slide(s.m)) {
-      auto& w = s.verified[*s.winner];
-      if (auto slid = best_slide(model, *slide, w.T, w.icp.overlap_fraction, w.icp.overlap_fraction - w.seen->free_space, fit, passes, taken)) {
-        w.move_to(*slid);
-        winner_coarse = coarse_overlap(w.T);
-      }
-    }
-    // A part whose distinguishing piece is small (a valve's stem and hand wheel, a tee's branch)
-    // also fits the scene with its large, nearly symmetric body (the run) turned about its axis
-    // and the piece where nothing contradicts it: the winner's turns compete with it, and one
-    // that fits about as well makes it ambiguous.
-    auto& w = s.verified[*s.winner];
-    auto turns = turns_of(model, library.turn_axes(s.m), w.T, w.icp.overlap_fraction - w.seen->free_space, winner_coarse, fit, passes, taken);
-    if (turns.better) {
-      w.move_to(*turns.better);
-      w.score = turns.better->coarse_score;
-    }
-    s.coarse_poses.insert(s.coarse_poses.end(), turns.coarse.begin(), turns.coarse.end());
-    s.gain = newly_explained(model.points, w.T);
-  };
-  // The last search's poses, for diagnosis (`accepted`: its winner was).
-  const auto record = [&](const Search& s, bool accepted) {
-    if (!params.keep_candidates) return;
-    for (size_t k = 0; k < s.verified.size(); ++k) {
-      const auto& v = s.verified[k];
-      RecognitionCandidate c = candidate_of(s.m, v.T, v.icp, v.seen ? &*v.seen : nullptr);
-      c.correspondences = v.size;
-      c.source = v.origin->source;
-      c.stage = accepted && s.winner == k ? RecognitionCandidate::Stage::accepted
-                : v.seen                   ? RecognitionCandidate::Stage::refused
-                                           : RecognitionCandidate::Stage::coarse;
-      result.candidates.push_back(c);
-    }
-  };
-
-  // The scene's cylinder axes, per radius of the library's cylinder models.
-  std::vector<std::pair<double, std::vector<detail::SceneAxis>>> axes_of_radius;
-  const auto scene_axes = [&](double radius) -> const std::vector<detail::SceneAxis>& {
-    for (const auto& [r, axes] : axes_of_radius)
-      if (std::abs(r - radius) < 0.25 * res) return axes;
-    return axes_of_radius.emplace_back(radius, detail::scene_axes(scene_points, scene_tree, radius, res, no_votes, params.axis_min_points))
-        .second;
-  };
-  std::vector<Search> searches(library.model_count());
-  for (size_t m = 0; m < searches.size(); ++m) {
-    auto& s = searches[m];
-    s.m = m;
-    s.candidates = per_model[m];
-    s.unusable = explained;
-    const PointCloud& model = library.model_points(m);
-    s.surface_support = std::make_unique<SurfaceSupport>(model, params.pair_score_points, scene_points, scene_tree);
-    s.same = std::make_unique<SameSurface>(model, library.model_tree(m));
-    auto made = detail::pair_hypotheses(model, scene_points, *s.surface_support, s.candidates, res, params);
-    const auto t_voting = Clock::now();
-    auto voted = detail::voting_hypotheses(library.pair_features(m), scene_points, no_votes, *s.surface_support, res, params);
-    result.seconds_voting += since(t_voting);
-    made.insert(made.end(), std::make_move_iterator(voted.begin()), std::make_move_iterator(voted.end()));
-    if (const auto* cylinder = library.cylinder(m); cylinder && params.axis_hypotheses) {
-      auto on_axes = detail::axis_hypotheses(*cylinder, scene_axes(cylinder->radius), *s.surface_support, res, params);
-      made.insert(made.end(), std::make_move_iterator(on_axes.begin()), std::make_move_iterator(on_axes.end()));
-    }
-    for (auto& h : detail::best_distinct(std::move(made), *s.same, static_cast<size_t>(std::max(params.pair_pool, 0)))) s.hypotheses.push_back(std::move(h));
-    // Round parts' hypotheses are ranked apart (below), so none is crowded out of the pool.
-    if (params.round_part_hypotheses)
-      for (const auto& part : library.round_parts(m))
-        for (auto& h : detail::axis_hypotheses(part, scene_axes(part.radius), *s.surface_support, res, params, RecognitionCandidate::Source::round_part))
-          s.hypotheses.push_back(std::move(h));
-  }
+  Interpretation interpretation(fit, library, no_votes, result);
+  interpretation.begin(std::move(per_model));
   result.seconds_hypotheses = since(t0);
-  // The scene points a search's winner newly explains, flagged; and how many of another's are among them.
-  const auto gain_flags = [&](const Search& s) {
-    std::vector<char> flags(scene_points.points.size(), 0);
-    for (const size_t p : s.gain) flags[p] = 1;
-    return flags;
-  };
-  const auto shared_gain = [](const std::vector<char>& flags, const Search& other) {
-    return static_cast<size_t>(std::count_if(other.gain.begin(), other.gain.end(), [&](size_t p) { return flags[p] != 0; }));
-  };
-  while (true) {
-    for (auto& s : searches)
-      if (s.stale && s.instances < params.max_instances) {
-        record(s, false);
-        search(s);
-        s.stale = false;
-      }
-    Search* next = nullptr;
-    for (auto& s : searches)
-      if (s.winner && s.instances < params.max_instances && (!next || s.gain.size() > next->gain.size())) next = &s;
-    if (!next) break;
-    // Another model's winner that this one's acceptance would refuse and whose acceptance would
-    // refuse this one is the other reading of the same object: the one the evidence is less
-    // against is accepted.
-    if (params.conflict_margin >= 0) {
-      const auto against = [](const Search& s) {
-        const auto& seen = *s.verified[*s.winner].seen;
-        return seen.free_space + (1 - seen.explained);
-      };
-      const auto gained = gain_flags(*next);
-      Search* better = next;
-      for (auto& other : searches) {
-        if (&other == next || !other.winner || other.instances >= params.max_instances) continue;
-        const auto shared = static_cast<double>(shared_gain(gained, other));
-        if (shared <= params.max_shared_support * static_cast<double>(other.gain.size()) ||
-            shared <= params.max_shared_support * static_cast<double>(next->gain.size()))
-          continue;
-        if (against(other) + params.conflict_margin < against(*better)) better = &other;
-      }
-      next = better;
-    }
-    // Accept it.
-    record(*next, true);
-    auto& verified = next->verified;
-    if (*next->winner != 0) std::swap(verified[*next->winner], verified.front());
-    auto& top = verified.front();
-    const LibraryModel found_model = library_model(library, next->m);
-    const auto slide = winner_slide(next->m);
-    if (slide) {
-      if (const auto slid = evidence_slide(found_model, *slide, top.T, fit, passes_of(next->m))) {
-        top.move_to(*slid);
-        next->gain = newly_explained(found_model.points, top.T);
-      }
-    }
-    RecognizedInstance found;
-    found.model = library.model_name(next->m);
-    found.model_index = next->m;
-    found.T_scene_model = top.T;
-    found.overlap_fraction = top.icp.overlap_fraction;
-    found.rmse_m = top.icp.rmse_m;
-    found.score = top.score;
-    found.correspondences = top.size;
-    found.free_space_fraction = top.seen->free_space;
-    found.visible_explained = top.seen->explained;
-    found.occluded_fraction = top.seen->occluded;
-    found.continued_fraction = top.seen->continued;
-    const auto ambiguous_with = [&](size_t m, const Transform& T) {
-      found.ambiguous = true;
-      found.alternative_model = library.model_name(m);
-      found.alternative_model_index = m;
-      found.T_scene_model_alternative = T;
-    };
-    // Ambiguous with another model: its search's winner (which passes the tests and lies on no
-    // accepted instance) explains nearly all of the scene surface this one newly explains; the one
-    // that explains most of it. A tee whose branch is hidden and a pipe on its run are told apart
-    // by nothing the sensor saw.
-    {
-      const auto gained = gain_flags(*next);
-      size_t most = 0;
-      for (const auto& other : searches) {
-        if (&other == next || !other.winner) continue;
-        const size_t shared = shared_gain(gained, other);
-        if (shared <= most || static_cast<double>(shared) < (1 - params.ambiguity_margin) * static_cast<double>(next->gain.size())) continue;
-        most = shared;
-        ambiguous_with(other.m, other.verified[*other.winner].T);
-      }
-    }
-    // Ambiguous, failing that: another pose at the same place that puts the model's surface
-    // elsewhere (not a turn about the part's own symmetry) puts nearly as much of the model on the
-    // scene (coarse ICP overlap) and passes the tests too; the best of the first three such.
-    if (!found.ambiguous) {
-      const double overlap = icp_point_to_plane(found_model.points, scene_points, scene_tree, top.T, coarse).overlap_fraction;
-      std::vector<const IcpResult*> rivals;
-      for (const auto& other : next->coarse_poses) {
-        const Transform& T = other.T_target_source;
-        if (other.overlap_fraction >= (1 - params.ambiguity_margin) * overlap && other.rmse_m <= params.max_rmse_factor * res &&
-            next->same->centre_distance(top.T, T) < 0.1 * next->same->diameter() && !(*next->same)(top.T, T, 0.1 * next->same->diameter()))
-          rivals.push_back(&other);
-      }
-      std::stable_sort(rivals.begin(), rivals.end(), [](const IcpResult* a, const IcpResult* b) { return a->overlap_fraction > b->overlap_fraction; });
-      for (size_t k = 0; k < rivals.size() && k < 3 && !found.ambiguous; ++k) {
-        const Transform& T = rivals[k]->T_target_source;
-        if (passes_of(next->m)(*rivals[k], free_space.check(found_model, T)) && !on_accepted(found_model.points, T)) ambiguous_with(next->m, T);
-      }
-    }
-    // Ambiguous, failing that: the model slid along itself (a pipe along its run, an elbow about
-    // its bend) by more than a tenth of its diameter puts nearly as much of it on the scene, less
-    // its share in free space (ambiguity_margin), and passes the tests there, refined: where both
-    // of a pipe's ends are hidden, nothing the sensor saw places it along the run. Of the first
-    // three such slides, farthest first, the first that passes: how far its place is open.
-    if (slide && !found.ambiguous) {
-      const double diameter = next->same->diameter();
-      const double least = (1 - params.ambiguity_margin) * (top.icp.overlap_fraction - top.seen->free_space);
-      auto slides = slides_of(found_model, *slide, top.T, (1 - params.ambiguity_margin) * top.icp.overlap_fraction, fit);
-      std::erase_if(slides, [&](const Slid& slid) { return slid.score < least || next->same->centre_distance(top.T, slid.T) < 0.1 * diameter; });
-      std::stable_sort(slides.begin(), slides.end(), [](const Slid& a, const Slid& b) { return std::abs(a.shift) > std::abs(b.shift); });
-      for (size_t k = 0; k < slides.size() && k < 3 && !found.ambiguous; ++k) {
-        const Moved moved = refined_from(found_model, slides[k].T, fit, passes_of(next->m));
-        const Transform& T = moved.icp.T_target_source;
-        if (moved.passed && moved.icp.overlap_fraction - moved.seen.free_space >= least && next->same->centre_distance(top.T, T) >= 0.1 * diameter &&
-            !on_accepted(found_model.points, T))
-          ambiguous_with(next->m, T);
-      }
-    }
-    result.instances.push_back(found);
-    for (const size_t p : next->gain) {
-      explained[p] = 1;
-      for (auto& s : searches) s.unusable[p] = 1;
-    }
-    ++next->instances;
-    next->verified.clear();
-    next->winner.reset();
-    next->stale = true;
-    // The scene points it explains no longer support other instances. Another model's instance
-    // found on it is refused; one that lost scene surface to it explains less; a search whose
-    // starting poses lost support to it would now rank others among its best.
-    for (auto& s : searches) {
-      std::erase_if(s.candidates, [&](const detail::Correspondence& c) { return explained[c.target]; });
-      if (s.stale) continue;
-      const PointCloud& other = library.model_points(s.m);
-      if (s.winner) {
-        if (on_accepted(other, s.verified[*s.winner].T)) s.stale = true;
-        else s.gain = newly_explained(other, s.verified[*s.winner].T);
-      } else {
-        // Searched again only when a starting pose not refined yet is now among the best.
-        const auto starts = ranked_starts(s, false);
-        s.stale = std::any_of(starts.begin(), starts.end(), [](const Start& st) { return !st.origin->coarse; });
-      }
-    }
-  }
-  for (const auto& s : searches) {
-    record(s, false);
-    if (params.keep_candidates)
-      for (const auto& h : s.hypotheses)
-        if (!h.coarse && h.source != RecognitionCandidate::Source::grouping) {
-          RecognitionCandidate c;
-          c.model_index = s.m;
-          c.T_scene_model = h.T_scene_model;
-          c.correspondences = h.first_support;
-          c.source = h.source;
-          c.stage = RecognitionCandidate::Stage::proposed;
-          result.candidates.push_back(c);
-        }
-  }
+  interpretation.run();
   result.seconds_verify = since(t0);
   return result;
 }
