@@ -425,6 +425,7 @@ int main(int argc, char** argv) {
       else if (k == "refused_turns") tuned.refused_turns = int(v);
       else if (k == "rivals") tuned.rivals = int(v);
       else if (k == "losing_rivals_stay_open") tuned.losing_rivals_stay_open = v != 0;
+      else if (k == "displaced_winner_distance") tuned.displaced_winner_distance = v;
       else if (k == "rival_margin") tuned.rival_margin = v;
       else if (k == "conflict_margin") tuned.conflict_margin = v;
       else if (k == "rival_coarse_slack") tuned.rival_coarse_slack = v;

@@ -800,6 +800,10 @@ void Interpretation::settle_winner(Search& s) {
     // The rivals tried are closed, but for one that passes and loses (losing_rivals_stay_open).
     for (size_t j = 0; j < rivals.size(); ++j)
       s.verified[rivals[j]].origin->done = !(params_.losing_rivals_stay_open && ok[j] && rivals[j] != *s.winner);
+    // The winner a rival displaced stays open when the two lie far enough apart to be two instances.
+    if (*s.winner != first_winner && params_.displaced_winner_distance >= 0 &&
+        s.same->centre_distance(s.verified[first_winner].T, s.verified[*s.winner].T) >= params_.displaced_winner_distance * s.same->diameter())
+      s.verified[first_winner].origin->done = false;
     if (*s.winner != first_winner) winner_coarse = coarse_overlap(s.verified[*s.winner].T);
   }
   if (const auto slide = winner_slide(s.m)) {
