@@ -58,6 +58,7 @@
 #include <opencv2/surface_matching/ppf_helpers.hpp>
 
 #include "artisan/core/io/ply.hpp"
+#include "artisan/core/pose.hpp"
 #include "artisan/perception/icp.hpp"
 #include "artisan/perception/kdtree.hpp"
 #include "artisan/perception/meshing.hpp"
@@ -767,12 +768,7 @@ int main(int argc, char** argv) {
     // Each detection's model and pose (T_scene_model, row by row, in metres): two runs compared
     // pose by pose, not only by their counts.
     json found_poses = json::array();
-    for (const auto& i : result.instances) {
-      std::vector<double> rows;
-      for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) rows.push_back(i.T_scene_model.matrix()(r, c));
-      found_poses.push_back({{"model", i.model}, {"T_scene_model", rows}});
-    }
+    for (const auto& i : result.instances) found_poses.push_back({{"model", i.model}, {"T_scene_model", to_row_major(i.T_scene_model)}});
     scene_j["poses"] = found_poses;
     if (with_ppf) {
       // The scene at the detector's own sampling distance (the relative sampling step times the models' mean diameter),

@@ -423,11 +423,10 @@ class Interpretation {
  public:
   /// `no_votes`: the scene points that do not vote for poses (nor are fitted for cylinder axes).
   Interpretation(const SceneFit& fit, SpinImageLibrary& library, const std::vector<char>& no_votes, RecognitionResult& result)
-      : fit_(fit), scene_(fit.scene), tree_(fit.scene_tree), params_(fit.params), res_(fit.res), library_(library), no_votes_(no_votes),
-        result_(result), explained_(fit.scene.points.size(), 0) {
+      : fit_(fit), params_(fit.params), library_(library), no_votes_(no_votes), result_(result), explained_(fit.scene.points.size(), 0) {
     grouping_.similarity_ratio = 0.0;  // the correlation threshold already filtered
     grouping_.geometric_consistency = params_.geometric_consistency;
-    grouping_.gamma_m = params_.gamma_factor * res_;
+    grouping_.gamma_m = params_.gamma_factor * fit_.res;
     grouping_.max_groups = params_.max_groups;
     grouping_.max_candidates = params_.max_matches_grouped;
   }
@@ -485,9 +484,9 @@ class Interpretation {
   std::vector<size_t> lies_on(const PointCloud& model, const Transform& T_scene_model) const {
     const Eigen::Isometry3f T = T_scene_model.cast<float>();
     std::vector<size_t> near, out;
-    std::vector<char> counted(scene_.points.size(), 0);
+    std::vector<char> counted(fit_.scene.points.size(), 0);
     for (const auto& p : model.points) {
-      tree_.within(T * p, static_cast<float>(2.0 * res_), near);
+      fit_.scene_tree.within(T * p, static_cast<float>(2.0 * fit_.res), near);
       for (const size_t s : near)
         if (!counted[s]) counted[s] = 1, out.push_back(s);
     }
@@ -509,7 +508,7 @@ class Interpretation {
   }
   // The tests for model m, and the unslackened ones.
   bool meets(size_t m, const IcpResult& icp, const FreeSpace::Check& seen, const Slack& slack) const {
-    return meets_tests(icp, seen, params_, res_, slack, library_.slides(m));
+    return meets_tests(icp, seen, params_, fit_.res, slack, library_.slides(m));
   }
   auto passes_of(size_t m) const {
     return [this, m](const IcpResult& icp, const FreeSpace::Check& seen) { return meets(m, icp, seen, {}); };
@@ -533,8 +532,9 @@ class Interpretation {
   // The scene's cylinder axes of a radius of the library's cylinder models, found once.
   const std::vector<detail::SceneAxis>& scene_axes(double radius) {
     for (const auto& [r, axes] : axes_of_radius_)
-      if (std::abs(r - radius) < 0.25 * res_) return axes;
-    return axes_of_radius_.emplace_back(radius, detail::scene_axes(scene_, tree_, radius, res_, no_votes_, params_.axis_min_points)).second;
+      if (std::abs(r - radius) < 0.25 * fit_.res) return axes;
+    auto axes = detail::scene_axes(fit_.scene, fit_.scene_tree, radius, fit_.res, no_votes_, params_.axis_min_points);
+    return axes_of_radius_.emplace_back(radius, std::move(axes)).second;
   }
 
   void refused_on_plane(Search& s, const Transform& T_scene_model, const FreeSpace::Check& seen);
@@ -551,10 +551,7 @@ class Interpretation {
   void explain(Search& next);
 
   const SceneFit& fit_;
-  const PointCloud& scene_;
-  const KdTree3& tree_;
   const RecognitionParams& params_;
-  const double res_;
   SpinImageLibrary& library_;
   const std::vector<char>& no_votes_;
   RecognitionResult& result_;
@@ -572,22 +569,24 @@ void Interpretation::begin(std::vector<std::vector<detail::Correspondence>> per_
     s.candidates = std::move(per_model[m]);
     s.unusable = explained_;
     const PointCloud& model = library_.model_points(m);
-    s.surface_support = std::make_unique<SurfaceSupport>(model, params_.pair_score_points, scene_, tree_);
+    s.surface_support = std::make_unique<SurfaceSupport>(model, params_.pair_score_points, fit_.scene, fit_.scene_tree);
     s.same = std::make_unique<SameSurface>(model, library_.model_tree(m));
-    auto made = detail::pair_hypotheses(model, scene_, *s.surface_support, s.candidates, res_, params_);
+    auto made = detail::pair_hypotheses(model, fit_.scene, *s.surface_support, s.candidates, fit_.res, params_);
     const auto t_voting = Clock::now();
-    auto voted = detail::voting_hypotheses(library_.pair_features(m), scene_, no_votes_, *s.surface_support, res_, params_);
+    auto voted = detail::voting_hypotheses(library_.pair_features(m), fit_.scene, no_votes_, *s.surface_support, fit_.res, params_);
     result_.seconds_voting += since(t_voting);
     made.insert(made.end(), std::make_move_iterator(voted.begin()), std::make_move_iterator(voted.end()));
     if (const auto* cylinder = library_.cylinder(m); cylinder && params_.axis_hypotheses) {
-      auto on_axes = detail::axis_hypotheses(*cylinder, scene_axes(cylinder->radius), *s.surface_support, res_, params_);
+      auto on_axes = detail::axis_hypotheses(*cylinder, scene_axes(cylinder->radius), *s.surface_support, fit_.res, params_);
       made.insert(made.end(), std::make_move_iterator(on_axes.begin()), std::make_move_iterator(on_axes.end()));
     }
-    for (auto& h : detail::best_distinct(std::move(made), *s.same, static_cast<size_t>(std::max(params_.pair_pool, 0)))) s.hypotheses.push_back(std::move(h));
+    for (auto& h : detail::best_distinct(std::move(made), *s.same, static_cast<size_t>(std::max(params_.pair_pool, 0))))
+      s.hypotheses.push_back(std::move(h));
     // Round parts' hypotheses are ranked apart (ranked_starts), so none is crowded out of the pool.
     if (params_.round_part_hypotheses)
       for (const auto& part : library_.round_parts(m))
-        for (auto& h : detail::axis_hypotheses(part, scene_axes(part.radius), *s.surface_support, res_, params_, RecognitionCandidate::Source::round_part))
+        for (auto& h :
+             detail::axis_hypotheses(part, scene_axes(part.radius), *s.surface_support, fit_.res, params_, RecognitionCandidate::Source::round_part))
           s.hypotheses.push_back(std::move(h));
   }
 }
@@ -605,18 +604,19 @@ void Interpretation::refused_on_plane(Search& s, const Transform& T_scene_model,
   for (const size_t p : on) s.unusable[p] = 1;
   if (planarity < 0.85) return;
   Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-  for (const size_t p : on) scatter += scene_.normals[p].cast<double>() * scene_.normals[p].cast<double>().transpose();
+  for (const size_t p : on) scatter += fit_.scene.normals[p].cast<double>() * fit_.scene.normals[p].cast<double>().transpose();
   const Eigen::Vector3f n = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(scatter).eigenvectors().col(2).cast<float>();
   Eigen::Vector3f centre = Eigen::Vector3f::Zero();
   size_t in_plane = 0;
   for (const size_t p : on)
-    if (std::abs(n.dot(scene_.normals[p])) > 0.9f) centre += scene_.points[p], ++in_plane;
+    if (std::abs(n.dot(fit_.scene.normals[p])) > 0.9f) centre += fit_.scene.points[p], ++in_plane;
   if (in_plane == 0) return;
   centre /= static_cast<float>(in_plane);
   std::vector<size_t> near;
-  tree_.within(T_scene_model.translation().cast<float>(), static_cast<float>(s.same->diameter()), near);
+  fit_.scene_tree.within(T_scene_model.translation().cast<float>(), static_cast<float>(s.same->diameter()), near);
   for (const size_t p : near)
-    if (std::abs(n.dot(scene_.points[p] - centre)) < static_cast<float>(2 * res_) && std::abs(n.dot(scene_.normals[p])) > 0.9f) s.unusable[p] = 1;
+    if (std::abs(n.dot(fit_.scene.points[p] - centre)) < static_cast<float>(2 * fit_.res) && std::abs(n.dot(fit_.scene.normals[p])) > 0.9f)
+      s.unusable[p] = 1;
 }
 
 // Starting poses: the groups' and the pair and voting hypotheses still open (one that lost half
@@ -627,14 +627,14 @@ std::vector<Interpretation::Start> Interpretation::ranked_starts(Search& s, bool
   const PointCloud& model = library_.model_points(s.m);
   // The same candidates group the same way: grouped again only when some were removed.
   if (regroup && params_.group_hypotheses && s.candidates.size() >= 3 && s.candidates.size() != std::exchange(s.grouped, s.candidates.size()))
-    for (const auto& g : detail::group_correspondences(model, scene_, s.candidates, grouping_, &s.agreements).groups) {
+    for (const auto& g : detail::group_correspondences(model, fit_.scene, s.candidates, grouping_, &s.agreements).groups) {
       const auto same = [&](const PoseHypothesis& h) { return h.T_scene_model.matrix() == g.T_target_source.matrix(); };
       if (std::any_of(s.hypotheses.begin(), s.hypotheses.end(), same)) continue;
       PoseHypothesis& h = s.hypotheses.emplace_back();
       h.T_scene_model = g.T_target_source;
       h.source = RecognitionCandidate::Source::grouping;
       h.size = g.size;
-      h.lies_on = s.surface_support->lies_on(h.T_scene_model, 2.0 * res_);
+      h.lies_on = s.surface_support->lies_on(h.T_scene_model, 2.0 * fit_.res);
       h.first_support = SurfaceSupport::count(*h.lies_on, s.unusable);
     }
   // Groups are scored with a wider margin: their coarser first pose only the ICP brings onto the
@@ -644,7 +644,7 @@ std::vector<Interpretation::Start> Interpretation::ranked_starts(Search& s, bool
   for (size_t k = 0; k < s.hypotheses.size(); ++k)
     if (PoseHypothesis& h = s.hypotheses[k]; !h.done) {
       if (!h.lies_on)
-        h.lies_on = s.surface_support->lies_on(h.T_scene_model, (h.source == RecognitionCandidate::Source::grouping ? 2.0 : 1.5) * res_);
+        h.lies_on = s.surface_support->lies_on(h.T_scene_model, (h.source == RecognitionCandidate::Source::grouping ? 2.0 : 1.5) * fit_.res);
       h.support = SurfaceSupport::count(*h.lies_on, s.unusable);
     }
   std::vector<Start> groups, pairs, parts;
@@ -693,11 +693,11 @@ void Interpretation::refine_starts(Search& s) {
 #pragma omp parallel for schedule(dynamic, 1)
     for (size_t k = 0; k < starts.size(); ++k)
       if (PoseHypothesis& h = *starts[k].origin; !h.coarse)
-        h.coarse = icp_point_to_plane(model.points, scene_, tree_, h.T_scene_model, fit_.coarse);
+        h.coarse = icp_point_to_plane(model.points, fit_.scene, fit_.scene_tree, h.T_scene_model, fit_.coarse);
     for (const auto& st : starts) {
       PoseHypothesis& h = *st.origin;
       const IcpResult& r = *h.coarse;
-      batch.push_back({r.T_target_source, r, coarse_score(r, res_), h.source == RecognitionCandidate::Source::grouping ? h.size : h.support,
+      batch.push_back({r.T_target_source, r, coarse_score(r, fit_.res), h.source == RecognitionCandidate::Source::grouping ? h.size : h.support,
                        std::nullopt, &h});
     }
     if (batch.empty()) break;
@@ -708,7 +708,7 @@ void Interpretation::refine_starts(Search& s) {
     for (const auto& v : batch) s.coarse_poses.push_back(v.icp);
     const size_t first = s.verified.size();
     for (auto& v : batch) {
-      const bool same = std::any_of(s.verified.begin(), s.verified.end(), [&](const Verified& d) { return (*s.same)(v.T, d.T, 2 * res_); });
+      const bool same = std::any_of(s.verified.begin(), s.verified.end(), [&](const Verified& d) { return (*s.same)(v.T, d.T, 2 * fit_.res); });
       if (same) v.origin->done = true;
       else s.verified.push_back(std::move(v));
     }
@@ -719,18 +719,19 @@ void Interpretation::refine_starts(Search& s) {
       // The screen's tests that need no check first: the overlap (the occlusion lowers what is
       // required, down to the floor), then the share through a solid's face (the check's first
       // measure). The silhouette is measured only for a pose that passes the screen's other tests.
-      if (!may_pass(v.icp, params_, res_, kPromising)) continue;
+      if (!may_pass(v.icp, params_, fit_.res, kPromising)) continue;
       // A pose mostly on surface where refused poses of the model lay flush (a flange's face slid
       // or turned on a box top) would be refused again: not refined.
-      if (params_.drop_refused_planes && 2 * (*s.surface_support)(v.T, 2.0 * res_, s.unusable) < (*s.surface_support)(v.T, 2.0 * res_, explained_)) continue;
+      const double margin = 2.0 * fit_.res;
+      if (params_.drop_refused_planes && 2 * (*s.surface_support)(v.T, margin, s.unusable) < (*s.surface_support)(v.T, margin, explained_)) continue;
       const auto screened = [&](const FreeSpace::Check& rest) { return meets(s.m, v.icp, rest, kPromising); };
       if (!meets(s.m, v.icp, v.seen.emplace(fit_.free_space.check(model, v.T, screened, params_.max_through_fraction)), kPromising)) continue;
       ++refined;
-      if (v.icp.rmse_m > kRefinedRmse * params_.max_rmse_factor * res_) {
+      if (v.icp.rmse_m > kRefinedRmse * params_.max_rmse_factor * fit_.res) {
         refused_on_plane(s, v.T, *v.seen);  // its coarse figures stand for the refined pose's (below)
         continue;
       }
-      v.icp = icp_point_to_plane(model.points, scene_, tree_, v.T, fit_.fine);
+      v.icp = icp_point_to_plane(model.points, fit_.scene, fit_.scene_tree, v.T, fit_.fine);
       v.T = v.icp.T_target_source;
       v.seen.emplace(fit_.free_space.check(model, v.T));
       // A pipe's place along its axis, which the ICP hardly holds, is searched when that is
@@ -769,7 +770,7 @@ void Interpretation::settle_winner(Search& s) {
   const auto passes = passes_of(s.m);
   const auto taken = [&](const Transform& T) { return on_accepted(model.points, T); };
   const auto coarse_overlap = [&](const Transform& T) {
-    return icp_point_to_plane(model.points, scene_, tree_, T, fit_.coarse).overlap_fraction;
+    return icp_point_to_plane(model.points, fit_.scene, fit_.scene_tree, T, fit_.coarse).overlap_fraction;
   };
   const size_t first_winner = *s.winner;
   double winner_coarse = coarse_overlap(s.verified[first_winner].T);
@@ -800,11 +801,13 @@ void Interpretation::settle_winner(Search& s) {
     // The rivals tried are closed, but for one that passes and loses (losing_rivals_stay_open).
     for (size_t j = 0; j < rivals.size(); ++j)
       s.verified[rivals[j]].origin->done = !(params_.losing_rivals_stay_open && ok[j] && rivals[j] != *s.winner);
-    // The winner a rival displaced stays open when the two lie far enough apart to be two instances.
-    if (*s.winner != first_winner && params_.displaced_winner_distance >= 0 &&
-        s.same->centre_distance(s.verified[first_winner].T, s.verified[*s.winner].T) >= params_.displaced_winner_distance * s.same->diameter())
-      s.verified[first_winner].origin->done = false;
-    if (*s.winner != first_winner) winner_coarse = coarse_overlap(s.verified[*s.winner].T);
+    if (*s.winner != first_winner) {
+      // The winner a rival displaced stays open when the two lie far enough apart to be two instances.
+      if (params_.displaced_winner_distance >= 0 &&
+          s.same->centre_distance(s.verified[first_winner].T, s.verified[*s.winner].T) >= params_.displaced_winner_distance * s.same->diameter())
+        s.verified[first_winner].origin->done = false;
+      winner_coarse = coarse_overlap(s.verified[*s.winner].T);
+    }
   }
   if (const auto slide = winner_slide(s.m)) {
     auto& w = s.verified[*s.winner];
@@ -872,7 +875,7 @@ void Interpretation::run() {
 
 // The scene points a search's winner newly explains, flagged; and how many of another's are among them.
 std::vector<char> Interpretation::gain_flags(const Search& s) const {
-  std::vector<char> flags(scene_.points.size(), 0);
+  std::vector<char> flags(fit_.scene.points.size(), 0);
   for (const size_t p : s.gain) flags[p] = 1;
   return flags;
 }
@@ -966,11 +969,11 @@ void Interpretation::mark_ambiguity(RecognizedInstance& found, const Search& nex
   // elsewhere (not a turn about the part's own symmetry) puts nearly as much of the model on the
   // scene (coarse ICP overlap) and passes the tests too; the best of the first three such.
   if (!found.ambiguous) {
-    const double overlap = icp_point_to_plane(found_model.points, scene_, tree_, top.T, fit_.coarse).overlap_fraction;
+    const double overlap = icp_point_to_plane(found_model.points, fit_.scene, fit_.scene_tree, top.T, fit_.coarse).overlap_fraction;
     std::vector<const IcpResult*> rivals;
     for (const auto& other : next.coarse_poses) {
       const Transform& T = other.T_target_source;
-      if (other.overlap_fraction >= (1 - params_.ambiguity_margin) * overlap && other.rmse_m <= params_.max_rmse_factor * res_ &&
+      if (other.overlap_fraction >= (1 - params_.ambiguity_margin) * overlap && other.rmse_m <= params_.max_rmse_factor * fit_.res &&
           next.same->centre_distance(top.T, T) < 0.1 * next.same->diameter() && !(*next.same)(top.T, T, 0.1 * next.same->diameter()))
         rivals.push_back(&other);
     }
